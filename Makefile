@@ -1,0 +1,37 @@
+# Exocet entry points. `make demo` and `make test` work on a fresh Debian bookworm machine:
+# each installs the Debian packages it needs, builds the catkin workspace and runs.
+SHELL := /bin/bash
+# A pyenv python3 ahead of /usr/bin breaks catkin and pluginlib's cmake: Debian's ROS wants /usr/bin/python3.
+export PATH := /usr/bin:/bin:/usr/sbin:/sbin:$(PATH)
+export ROS_HOME ?= $(CURDIR)/out/ros
+JOBS ?= $(shell nproc)
+BUILD_TYPE ?= Release
+
+.PHONY: all deps build bags demo test bench format clean
+all: build
+
+deps:
+	@tools/install-deps.sh
+
+build: deps
+	@mkdir -p out
+	catkin_make -j$(JOBS) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DCATKIN_ENABLE_TESTING=ON
+
+# The sample dives, made deterministically by the project's simulator (not committed).
+bags: build
+	@tools/make-bags.sh
+
+demo: bags
+	@tools/run-demo.sh
+
+test: build bags
+	@tools/run-tests.sh
+
+bench: build
+	@tools/run-bench.sh
+
+format:
+	@find src tests -name '*.cpp' -o -name '*.h' | xargs clang-format -i
+
+clean:
+	rm -rf build devel install out
