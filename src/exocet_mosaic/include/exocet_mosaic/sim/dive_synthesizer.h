@@ -1,0 +1,108 @@
+/**
+ * @file dive_synthesizer.h
+ * @brief Runs a simulated dive: the vehicle's trajectory, its navigation sensors and the downward camera's images,
+ * with ground truth, delivered in time order to a sink (a bag writer, a test, a benchmark). No ROS in it.
+ */
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_mosaic/sim/imaging_config.h"
+#include "exocet_mosaic/sim/navigation_sensors.h"
+#include "exocet_mosaic/sim/seabed_renderer.h"
+#include "exocet_mosaic/sim/seabed_texture.h"
+#include "exocet_mosaic/sim/vehicle_trajectory.h"
+
+namespace exocet_mosaic {
+namespace sim {
+
+/// The downward camera and how it sits on the vehicle.
+struct CameraRig {
+  CameraModel camera = CameraModel::pal();
+  double fps = 25.0;
+  std::string encoding = "bgr8";
+  /// Camera optical centre in base_link (metres): forward, left, up.
+  Eigen::Vector3d lever_arm_m = Eigen::Vector3d(0.3, 0.0, -0.2);
+  /// Deviation of the camera from looking straight down, as roll, pitch, yaw about its own axes (degrees).
+  Eigen::Vector3d mounting_rpy_deg = Eigen::Vector3d::Zero();
+  double drop_probability = 0.0;  ///< probability that a frame is lost (a gap in the image stream)
+
+  /// base_link -> camera_optical: z down the optical axis, image x to starboard, image up = forward.
+  Eigen::Isometry3d baseFromCamera() const;
+  std::string validate() const;
+};
+
+/// Everything that defines a simulated dive except the seabed (given as texture and relief objects).
+struct DiveSynthesisConfig {
+  uint64_t seed = 1;
+  double start_time_unix_s = 1780300800.0;  ///< 2026-06-01T08:00:00Z
+  double duration_s = 0.0;                  ///< 0: the whole trajectory
+  double seabed_depth_m = 60.0;             ///< depth of the reference seabed plane
+  GeoReference geo;                         ///< from the origin's latitude/longitude
+  TrajectoryConfig trajectory;
+  NavigationSensorConfig navigation;
+  ImagingConfig imaging;
+  CameraRig rig;
+  double ground_truth_rate_hz = 50.0;
+  std::vector<Landmark> landmarks;
+  int threads = 1;                          ///< rendering threads (the result does not depend on it)
+
+  std::string validate() const;
+};
+
+/// One rendered frame with its ground truth.
+struct FrameTruth {
+  CameraFrame frame;
+  bool dropped = false;                     ///< the frame was lost: `frame.image` is empty
+  VehicleState vehicle;                     ///< local frame
+  Eigen::Isometry3d world_from_camera;      ///< UTM frame (E, N, up)
+  double camera_altitude_m = 0.0;           ///< distance along the optical axis to the seabed
+  double ground_sample_distance_m = 0.0;    ///< camera_altitude_m / focal length
+  Eigen::Vector2d latlon_deg = Eigen::Vector2d::Zero();  ///< camera centre
+};
+
+struct DiveSink {
+  NavigationSinks navigation;
+  std::function<void(const PoseRecord&)> ground_truth;   ///< base_link in UTM at ground_truth_rate_hz
+  std::function<void(const FrameTruth&)> frame;
+  std::function<void(int frames_done, int frames_total)> progress;
+};
+
+class DiveSynthesizer {
+ public:
+  /// Validates everything (throws std::invalid_argument naming the field); texture and relief outlive the object.
+  DiveSynthesizer(const DiveSynthesisConfig& config, SeabedTexture* texture, SeabedRelief* relief);
+
+  double duration_s() const { return duration_s_; }
+  int frameCount() const;
+  /// Runs the whole dive into the sink.
+  void run(const DiveSink& sink);
+
+  const VehicleTrajectory& trajectory() const { return trajectory_; }
+  SeabedRenderer& renderer() { return renderer_; }
+  /// Camera pose in the local frame at dive time t.
+  Eigen::Isometry3d cameraPoseLocal(double t_s) const;
+  /// Local frame -> UTM frame.
+  Eigen::Vector3d toWorld(const Eigen::Vector3d& local) const;
+
+ private:
+  DiveSynthesisConfig config_;
+  SeabedRelief* relief_;
+  VehicleTrajectory trajectory_;
+  SeabedRenderer renderer_;
+  double duration_s_;
+};
+
+/// Distance from `origin` along `direction` (local frame) to the seabed (relief on the reference plane).
+double rayToSeabed_m(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, const SeabedRelief& relief);
+
+/// Landmarks spread along a trajectory: `count` targets at regular times, alternately offset left and right.
+std::vector<Landmark> landmarksAlongTrajectory(const VehicleTrajectory& trajectory, int count, double size_m,
+                                               double lateral_offset_m);
+
+}  // namespace sim
+}  // namespace exocet_mosaic
