@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/LU>
 #include <yaml-cpp/yaml.h>
 
 #include "exocet_mosaic/sim/atomic_file.h"

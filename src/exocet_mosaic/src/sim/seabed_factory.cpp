@@ -1,0 +1,39 @@
+// Builds the seabed (texture and relief) a dive description asks for.
+#include <stdexcept>
+
+#include "exocet_mosaic/sim/dive_description.h"
+#include "exocet_mosaic/sim/image_seabed.h"
+#include "exocet_mosaic/sim/procedural_seabed.h"
+
+namespace exocet_mosaic {
+namespace sim {
+
+Seabed makeSeabed(const SeabedSpec& spec, uint64_t seed) {
+  Seabed seabed;
+  if (spec.kind == "image") {
+    seabed.texture = std::make_unique<ImageSeabed>(spec.image, spec.image_pixel_size_m, spec.image_center_x_m,
+                                                   spec.image_center_y_m);
+    seabed.relief = std::make_unique<FlatRelief>();
+    return seabed;
+  }
+  if (spec.kind != "procedural") throw std::invalid_argument("seabed.kind '" + spec.kind + "' is not one of procedural, image");
+  ProceduralSeabedConfig config;
+  config.seed = seed;
+  config.base_texel_m = spec.texel_m;
+  config.cache_budget_mb = spec.cache_budget_mb;
+  config.relief_enabled = spec.relief && spec.relief_scale > 0.0;
+  config.mound_amplitude_m *= spec.relief_scale;
+  config.rock_height_scale *= spec.relief_scale;
+  config.ripple_height_m *= spec.relief_scale;
+  const std::string problem = config.validate();
+  if (!problem.empty()) throw std::invalid_argument("seabed: " + problem);
+  seabed.texture = std::make_unique<ProceduralSeabedTexture>(config);
+  if (config.relief_enabled)
+    seabed.relief = std::make_unique<ProceduralRelief>(config);
+  else
+    seabed.relief = std::make_unique<FlatRelief>();
+  return seabed;
+}
+
+}  // namespace sim
+}  // namespace exocet_mosaic

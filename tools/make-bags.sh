@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Renders the sample dives of config/dives/sample_*.yaml into bags/ with the project's simulator.
+# A bag is remade only when its description or the simulator changed (the bag is deterministic, so this is safe).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export PATH=/usr/bin:/bin:$PATH
+synth=devel/lib/exocet_mosaic/dive_synth
+[[ -x $synth ]] || { echo "make-bags: $synth is missing: run 'make build' first" >&2; exit 1; }
+mkdir -p bags
+for config in config/dives/sample_*.yaml; do
+  name=$(basename "$config" .yaml)
+  bag=bags/$name.bag
+  if [[ -f $bag && $bag -nt $config && $bag -nt $synth && $bag -nt devel/lib/libexocet_mosaic_sim.so ]]; then
+    echo "make-bags: $bag is up to date"
+    continue
+  fi
+  echo "make-bags: rendering $bag from $config"
+  "$synth" --config "$config" --output "$bag" --threads "$(nproc)"
+done

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Runs every gtest, rostest and whole-system test of the workspace and prints the verdict of catkin_test_results
+# (catkin_make run_tests itself exits 0 even when a test fails). Closing line: "N passed, N failed".
+set -uo pipefail
+cd "$(dirname "$0")/.."
+export PATH=/usr/bin:/bin:$PATH
+export ROS_HOME=${ROS_HOME:-$PWD/out/ros}
+mkdir -p out "$ROS_HOME"
+# shellcheck disable=SC1091
+source devel/setup.bash
+rm -rf build/test_results
+start=$(date +%s)
+catkin_make run_tests -j"$(nproc)" > out/test.log 2>&1
+build_status=$?
+grep -E "^\[ RUN|^\[  (FAILED|PASSED)|^\[       OK|FAILURE|ERROR|failed|\[ROSTEST\]|^-- run_tests" out/test.log | grep -v "^\[       OK" | tail -n 80
+echo
+echo "Full log: out/test.log ($(($(date +%s) - start)) s)"
+summary=$(catkin_test_results build/test_results 2>&1)
+echo "$summary" | grep -vE "^Skipping" | tail -n 30
+line=$(echo "$summary" | grep -E "^Summary:" | tail -n 1)
+if [[ -z $line ]]; then
+  echo "run-tests: no test results were produced (see out/test.log)"
+  echo "0 passed, 1 failed"
+  exit 1
+fi
+total=$(echo "$line" | sed -E 's/Summary: ([0-9]+) tests.*/\1/')
+errors=$(echo "$line" | sed -E 's/.* ([0-9]+) errors.*/\1/')
+failures=$(echo "$line" | sed -E 's/.* ([0-9]+) failures.*/\1/')
+skipped=$(echo "$line" | sed -E 's/.* ([0-9]+) skipped.*/\1/')
+failed=$((errors + failures))
+passed=$((total - failed - skipped))
+if [[ $build_status -ne 0 ]]; then
+  echo "run-tests: building or running the tests failed (exit $build_status): see out/test.log"
+  failed=$((failed + 1))
+fi
+echo "$passed passed, $failed failed"
+[[ $failed -eq 0 ]]
