@@ -130,6 +130,10 @@ void DiveBagWriter::write(const std::string& topic, double record_time_s, const 
     connection_header = boost::make_shared<ros::M_string>();
     (*connection_header)["latching"] = "1";
     (*connection_header)["callerid"] = "/dive_bag_writer";
+    // Given a header, rosbag writes it as is: it must carry the type, checksum and definition itself.
+    (*connection_header)["type"] = ros::message_traits::datatype<M>();
+    (*connection_header)["md5sum"] = ros::message_traits::md5sum<M>();
+    (*connection_header)["message_definition"] = ros::message_traits::definition<M>();
   }
   bag_->write(topic, toRosTime(record_time_s), msg, connection_header);
   ++message_count_;

@@ -23,7 +23,8 @@ Eigen::Vector2d latLonToGrid(const GeoReference& ref, double latitude_deg, doubl
 /// Latitude/longitude (degrees) of a grid point (easting, northing) of the zone of `ref`.
 Eigen::Vector2d gridToLatLon(const GeoReference& ref, double easting_m, double northing_m);
 
-/// Meridian convergence (radians) at a grid point: the angle from grid north to true north, positive clockwise.
+/// Meridian convergence (radians) at a grid point: the bearing of grid north clockwise from true north
+/// (GeographicLib's gamma), so a true heading converts to a grid heading as heading_grid = heading_true - gamma.
 double gridConvergence_rad(const GeoReference& ref, double easting_m, double northing_m);
 
 }  // namespace sim

@@ -1,0 +1,95 @@
+// dive_import: images + navigation CSV + camera intrinsics -> a dive bag with the simulator's layout.
+// Usage and conventions: dive_import --help (text in sim/dive_import.cpp), README_dive_import.md.
+
+#include <csignal>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "exocet_mosaic/ros/dive_bag_writer.h"
+#include "exocet_mosaic/sim/dive_import.h"
+
+namespace {
+
+volatile std::sig_atomic_t g_signal = 0;
+void onSignal(int signal) { g_signal = signal; }
+
+struct Interrupted {
+  int signal;
+};
+
+/// Checks for SIGINT/SIGTERM between records: unwinding then destroys the bag writer, which removes the
+/// temporary bag, so that an interrupted import leaves nothing behind.
+class InterruptibleBagSink final : public exocet_mosaic::sim::DiveRecordSink {
+ public:
+  explicit InterruptibleBagSink(exocet_mosaic::DiveBagWriter* writer) : sink_(writer) {}
+  void writeDatum(const exocet_mosaic::sim::GeoReference& d, double stamp_s) override {
+    check();
+    sink_.writeDatum(d, stamp_s);
+  }
+  void writeStaticTransforms(const std::vector<exocet_mosaic::sim::StaticTransform>& t, double stamp_s) override {
+    check();
+    sink_.writeStaticTransforms(t, stamp_s);
+  }
+  void writeCameraFrame(const exocet_mosaic::sim::CameraFrame& f, const exocet_mosaic::sim::CameraModel& c) override {
+    check();
+    sink_.writeCameraFrame(f, c);
+  }
+  void writeNavOdometry(const exocet_mosaic::sim::PoseRecord& p) override {
+    check();
+    sink_.writeNavOdometry(p);
+  }
+  void writeDepth(const exocet_mosaic::sim::DepthRecord& d) override {
+    check();
+    sink_.writeDepth(d);
+  }
+  void writeAltitude(const exocet_mosaic::sim::AltitudeRecord& a) override {
+    check();
+    sink_.writeAltitude(a);
+  }
+
+ private:
+  static void check() {
+    if (g_signal != 0) throw Interrupted{g_signal};
+  }
+  exocet_mosaic::sim::DiveRecordSinkFor<exocet_mosaic::DiveBagWriter> sink_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  namespace sim = exocet_mosaic::sim;
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  try {
+    const sim::DiveImportOptions options =
+        sim::parseDiveImportArguments(std::vector<std::string>(argv + 1, argv + argc));
+    if (options.help) {
+      std::cout << sim::diveImportUsage();
+      return 0;
+    }
+    const sim::DiveImport dive = sim::prepareDiveImport(options);
+    for (const auto& warning : dive.warnings) std::cerr << "dive_import: warning: " << warning << "\n";
+
+    exocet_mosaic::DiveBagWriter::Options bag_options;
+    bag_options.image_storage = exocet_mosaic::parseImageStorage(options.image_storage);
+    bag_options.world_frame = dive.navigation.world_frame;
+    exocet_mosaic::DiveBagWriter writer(options.output_path, bag_options);
+    InterruptibleBagSink sink(&writer);
+    const sim::DiveImportSummary summary = sim::writeDiveImport(dive, &sink);
+    writer.commit();
+    for (const auto& warning : summary.warnings()) std::cerr << "dive_import: warning: " << warning << "\n";
+    std::cout << summary.line(options.output_path) << std::endl;
+    return 0;
+  } catch (const sim::DiveImportError& e) {
+    std::cerr << "dive_import: error: " << e.what() << "\n";
+    return e.exitCode();
+  } catch (const Interrupted& interrupted) {
+    std::cerr << "dive_import: interrupted by signal " << interrupted.signal << "; no bag written\n";
+    return 128 + interrupted.signal;
+  } catch (const std::exception& e) {
+    // The bag writer's and rosbag's failures: disk full, rename refused, ...
+    std::cerr << "dive_import: error: " << e.what() << "\n";
+    return 1;
+  }
+}
