@@ -152,6 +152,8 @@ cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camer
   const float path_ref = h_ref * (1.0f + strength);
   const float c_ref = static_cast<float>(imaging_.attenuation_per_m[1]);
   const float light_gain = static_cast<float>(g.light_gain);
+  const float veil_light = 1.0f - strength + strength * light_gain;
+  const bool attenuating = c[0] > 0.0f || c[1] > 0.0f || c[2] > 0.0f || veil[0] > 0.0f || veil[1] > 0.0f || veil[2] > 0.0f;
 
   cv::Mat radiance(H, W, CV_32FC3);
   cv::Mat depth(H, W, CV_32F);
@@ -232,17 +234,22 @@ cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camer
           const Eigen::Vector3f to_lamp = g.lamp - p_rel;
           lamp_path = to_lamp.norm();
           const Eigen::Vector3f l = to_lamp / lamp_path;
-          const float cos_off = std::min(1.0f, std::max(-1.0f, -l.dot(g.lamp_axis)));
-          const float off_axis = std::acos(cos_off);
-          const float beam = std::exp(-beam_k * off_axis * off_axis);
+          // theta^2 from cos(theta) by its series (2 (1 - c) (1 + (1 - c) / 3)): within 1% up to 60 deg, no acos.
+          const float one_minus_cos = 1.0f - std::min(1.0f, std::max(-1.0f, -l.dot(g.lamp_axis)));
+          const float off_axis2 = 2.0f * one_minus_cos * (1.0f + one_minus_cos / 3.0f);
+          const float beam = std::exp(-beam_k * off_axis2);
           const float ratio = h_ref / lamp_path;
           irradiance += strength * light_gain * beam * std::max(0.0f, n.dot(l)) * ratio * ratio;
         }
         cv::Vec3f value;
-        for (int k = 0; k < 3; ++k) {
-          const float transmission = std::exp(-c[k] * (range + strength * lamp_path) + c_ref * path_ref);
-          const float backscatter = veil[k] * (1.0f - std::exp(-c[k] * range)) * (1.0f - strength + strength * light_gain);
-          value[k] = vig[u] * (albedo[k] * irradiance * transmission + backscatter);
+        if (attenuating) {
+          for (int k = 0; k < 3; ++k) {
+            const float transmission = std::exp(-c[k] * (range + strength * lamp_path) + c_ref * path_ref);
+            const float backscatter = veil[k] * (1.0f - std::exp(-c[k] * range)) * veil_light;
+            value[k] = vig[u] * (albedo[k] * irradiance * transmission + backscatter);
+          }
+        } else {
+          value = albedo * (vig[u] * irradiance);
         }
         out[u] = value;
       }
@@ -331,6 +338,11 @@ cv::Mat SeabedRenderer::encode(const cv::Mat& radiance_rgb, int frame_index, con
   const float read2 = static_cast<float>(imaging_.noise_sigma_dn * imaging_.noise_sigma_dn);
   const float shot = static_cast<float>(imaging_.shot_noise_dn);
   const bool noisy = read2 > 0.0f || shot > 0.0f;
+  // Camera response through a table (4096 steps, linear between): pow() per sample would dominate encoding.
+  constexpr int kSteps = 4096;
+  std::vector<float> response(kSteps + 2);
+  for (int i = 0; i <= kSteps + 1; ++i)
+    response[i] = 255.0f * std::pow(std::min(1.0f, static_cast<float>(i) / kSteps), inv_gamma);
   cv::Mat rgb(H, W, wide ? CV_16UC3 : CV_8UC3);
   const uint64_t frame_key = hashKeys(seed_, 0x1A6E, static_cast<uint64_t>(frame_index));
   for (int v = 0; v < H; ++v) {
@@ -340,7 +352,9 @@ cv::Mat SeabedRenderer::encode(const cv::Mat& radiance_rgb, int frame_index, con
     const cv::Vec3f* in = radiance_rgb.ptr<cv::Vec3f>(v);
     for (int u = 0; u < W; ++u)
       for (int k = 0; k < 3; ++k) {
-        float value_dn = 255.0f * std::pow(std::min(1.0f, std::max(0.0f, gain * in[u][k])), inv_gamma);
+        const float x = std::min(1.0f, std::max(0.0f, gain * in[u][k])) * kSteps;
+        const int i = static_cast<int>(x);
+        float value_dn = response[i] + (x - i) * (response[i + 1] - response[i]);
         if (noisy) {
           if (bits_left == 0) {
             bits = rng.next();
@@ -351,7 +365,7 @@ cv::Mat SeabedRenderer::encode(const cv::Mat& radiance_rgb, int frame_index, con
           --bits_left;
           value_dn += z * std::sqrt(read2 + shot * value_dn);
         }
-        const float out = std::min(full_scale, std::max(0.0f, std::round(value_dn * dn_scale)));
+        const float out = std::min(full_scale, std::max(0.0f, std::nearbyint(value_dn * dn_scale)));
         if (wide)
           rgb.ptr<cv::Vec3w>(v)[u][k] = static_cast<uint16_t>(out);
         else
