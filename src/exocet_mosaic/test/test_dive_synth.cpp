@@ -367,7 +367,7 @@ TEST(DiveSynthTool, BadInputsExitWithAClearErrorAndLeaveNoOutput) {
       {"--waypoints " + dir + "/missing.csv", 2, "missing.csv"},
       {"--config " + dir + "/missing.yaml", 2, "missing.yaml"},
       {"--seabed-image " + dir + "/missing.png", 1, "missing.png"},
-      {"--set imaging.segments=[{start_s: 9, end_s: 3}]", 2, "end_s"},
+      {"--set 'imaging.segments=[{start_s: 9, end_s: 3}]'", 2, "end_s"},
       {"--set camera.fps=-5", 2, "camera.fps"},
       {"--frobnicate", 2, "unknown argument"},
   };
@@ -382,7 +382,7 @@ TEST(DiveSynthTool, BadInputsExitWithAClearErrorAndLeaveNoOutput) {
   EXPECT_EQ(runCommand(kSynth + " --quiet --duration 0.5 --output /nonexistent_dir/x.bag", &err), 1);
   EXPECT_NE(err.find("/nonexistent_dir"), std::string::npos) << err;
   // Interrupted mid-dive: nothing under the final name, no temporary file left behind.
-  const int status = std::system(("timeout -s INT 2 " + kSynth + " --quiet --output " + out + " > /dev/null 2>&1").c_str());
+  const int status = std::system(("timeout --preserve-status -s INT 2 " + kSynth + " --quiet --output " + out + " > /dev/null 2>&1").c_str());
   EXPECT_EQ(WEXITSTATUS(status), 130);
   EXPECT_FALSE(exists(out));
   std::string listing;

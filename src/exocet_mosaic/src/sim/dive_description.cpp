@@ -187,7 +187,13 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   if (!(d.camera_hfov_deg >= 10.0 && d.camera_hfov_deg <= 150.0))
     throw std::invalid_argument("camera.hfov_deg = " + std::to_string(d.camera_hfov_deg) + " out of range [10, 150] deg");
   rig.camera = d.camera_preset == "hd" ? CameraModel::hd(d.camera_hfov_deg) : CameraModel::pal(d.camera_hfov_deg);
-  if (!d.intrinsics_yaml.empty()) rig.camera = loadCameraModelYaml(d.intrinsics_yaml);
+  if (!d.intrinsics_yaml.empty()) {
+    try {
+      rig.camera = loadCameraModelYaml(d.intrinsics_yaml);
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument(std::string("camera.intrinsics_yaml: ") + e.what());
+    }
+  }
   camera.get("width", &rig.camera.width);
   camera.get("height", &rig.camera.height);
   camera.get("fx", &rig.camera.fx);
@@ -232,7 +238,11 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   if (t.kind == TrajectoryConfig::Kind::kWaypoints) {
     if (d.waypoints_csv.empty())
       throw std::invalid_argument("trajectory.kind is waypoints but trajectory.waypoints_csv is not given");
-    t.waypoints = loadWaypointsCsv(d.waypoints_csv);
+    try {
+      t.waypoints = loadWaypointsCsv(d.waypoints_csv);
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument(std::string("trajectory.waypoints_csv: ") + e.what());
+    }
   }
 
   Section nav(top.child("navigation"), "navigation");
@@ -361,7 +371,7 @@ DiveDescription loadDiveDescription(const std::string& path, const std::vector<s
 std::string toYaml(const DiveDescription& d) {
   const DiveSynthesisConfig& s = d.synthesis;
   YAML::Emitter e;
-  e.SetDoublePrecision(15);
+  e.SetDoublePrecision(17);  // round-trips every double: the description reproduces the bag
   auto seq3 = [&](const char* key, const double* v) {
     e << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq << v[0] << v[1] << v[2] << YAML::EndSeq;
   };

@@ -25,6 +25,10 @@ Seabed makeSeabed(const SeabedSpec& spec, uint64_t seed) {
   config.mound_amplitude_m *= spec.relief_scale;
   config.rock_height_scale *= spec.relief_scale;
   config.ripple_height_m *= spec.relief_scale;
+  // The vehicle flies at a set height over the reference plane, not terrain-following: keep the regional slope
+  // to a local one (+-0.3 m over +-15 m) so that the seabed stays under the camera over a long survey.
+  config.regional_slope = 0.02 * spec.relief_scale;
+  config.regional_slope_extent_m = 15.0;
   const std::string problem = config.validate();
   if (!problem.empty()) throw std::invalid_argument("seabed: " + problem);
   seabed.texture = std::make_unique<ProceduralSeabedTexture>(config);

@@ -183,7 +183,7 @@ cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camer
           px = ox + t * d.x();
           py = oy + t * d.y();
         } else {
-          t = (Cz - h_max) / -d.z();
+          t = std::max(0.0, (Cz - h_max) / -d.z());
           const double denom = -d.z() + slope_bound * std::hypot(d.x(), d.y());
           for (int it = 0; it < 200; ++it) {
             px = ox + t * d.x();
