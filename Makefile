@@ -21,10 +21,12 @@ build: deps
 bags: build
 	@tools/make-bags.sh
 
-demo: bags
+demo: build
+	@tools/make-bags.sh sample_lawnmower
 	@tools/run-demo.sh
 
-test: build bags
+test: build
+	@tools/make-bags.sh sample_out_and_back
 	@tools/run-tests.sh
 
 bench: build

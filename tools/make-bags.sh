@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Renders the sample dives of config/dives/sample_*.yaml into bags/ with the project's simulator.
+# Renders sample dives of config/dives/ into bags/ with the project's simulator: the ones named as arguments
+# (e.g. sample_out_and_back), or every config/dives/sample_*.yaml.
 # A bag is remade only when its description or the simulator changed (the bag is deterministic, so this is safe).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -7,7 +8,14 @@ export PATH=/usr/bin:/bin:$PATH
 synth=devel/lib/exocet_mosaic/dive_synth
 [[ -x $synth ]] || { echo "make-bags: $synth is missing: run 'make build' first" >&2; exit 1; }
 mkdir -p bags
-for config in config/dives/sample_*.yaml; do
+configs=()
+if [[ $# -gt 0 ]]; then
+  for name in "$@"; do configs+=("config/dives/$name.yaml"); done
+else
+  configs=(config/dives/sample_*.yaml)
+fi
+for config in "${configs[@]}"; do
+  [[ -f $config ]] || { echo "make-bags: no dive description $config" >&2; exit 1; }
   name=$(basename "$config" .yaml)
   bag=bags/$name.bag
   if [[ -f $bag && $bag -nt $config && $bag -nt $synth && $bag -nt devel/lib/libexocet_mosaic_sim.so ]]; then
