@@ -189,8 +189,21 @@ cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camer
             px = ox + t * d.x();
             py = oy + t * d.y();
             const double f = Cz + t * d.z() - heights.sample(px, py);
-            if (f < 2e-5) break;
+            if (f < 2e-3) break;
             t += f / denom;
+          }
+          // Within 2 mm above the surface the conservative steps crawl: finish with Newton steps on the local slope
+          // (the surface ahead is the first one hit; a step that would go back up is not taken).
+          for (int it = 0; it < 6; ++it) {
+            px = ox + t * d.x();
+            py = oy + t * d.y();
+            const double f = Cz + t * d.z() - heights.sample(px, py);
+            if (std::abs(f) < 1e-5) break;
+            const double gx = (heights.sample(px + grid, py) - heights.sample(px - grid, py)) / (2 * grid);
+            const double gy = (heights.sample(px, py + grid) - heights.sample(px, py - grid)) / (2 * grid);
+            const double slope = d.z() - gx * d.x() - gy * d.y();
+            if (slope > -1e-6) break;
+            t -= f / slope;
           }
           px = ox + t * d.x();
           py = oy + t * d.y();
