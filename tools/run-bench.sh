@@ -5,8 +5,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 export PATH=/usr/bin:/bin:$PATH
 export ROS_HOME=${ROS_HOME:-$PWD/out/ros}
+set +u  # setup.bash reads unset variables
 # shellcheck disable=SC1091
 source devel/setup.bash
+set -u
 mkdir -p out/bench
 status=0
 for bench in devel/lib/*/bench_*; do

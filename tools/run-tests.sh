@@ -6,8 +6,10 @@ cd "$(dirname "$0")/.."
 export PATH=/usr/bin:/bin:$PATH
 export ROS_HOME=${ROS_HOME:-$PWD/out/ros}
 mkdir -p out "$ROS_HOME"
+set +u  # setup.bash reads unset variables
 # shellcheck disable=SC1091
 source devel/setup.bash
+set -u
 rm -rf build/test_results
 start=$(date +%s)
 catkin_make run_tests -j"$(nproc)" > out/test.log 2>&1
