@@ -7,6 +7,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -361,7 +362,13 @@ TEST(DiveSynthTool, BadInputsExitWithAClearErrorAndLeaveNoOutput) {
     std::ofstream wp(dir + "/backwards.csv");
     wp << "x_m,y_m,altitude_m\n0,0,2\n5,0,-1\n";
   }
+  {
+    // A 200x200 px picture of 1 cm pixels: 2 m wide, smaller than the camera's footprint.
+    cv::Mat picture(200, 200, CV_8UC3, cv::Scalar(90, 120, 140));
+    cv::imwrite(dir + "/small.png", picture);
+  }
   const std::vector<Case> cases = {
+      {"--seabed-image " + dir + "/small.png --seabed-pixel-size 0.01", 2, "leaves the seabed image"},
       {"--set trajectory.altitude_m=-3", 2, "trajectory.altitude_m"},
       {"--waypoints " + dir + "/backwards.csv", 2, "altitude_m"},
       {"--waypoints " + dir + "/missing.csv", 2, "missing.csv"},

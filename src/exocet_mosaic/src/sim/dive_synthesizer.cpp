@@ -134,6 +134,24 @@ Eigen::Isometry3d DiveSynthesizer::cameraPoseLocal(double t_s) const {
   return world_from_base * config_.rig.baseFromCamera();
 }
 
+WorldRect DiveSynthesizer::footprintOnReferencePlane(double t_s) const {
+  const Eigen::Isometry3d pose = cameraPoseLocal(t_s);
+  const CameraModel& c = config_.rig.camera;
+  WorldRect r{1e300, 1e300, -1e300, -1e300};
+  for (const auto& px : {Eigen::Vector2d(0, 0), Eigen::Vector2d(c.width - 1, 0), Eigen::Vector2d(0, c.height - 1),
+                         Eigen::Vector2d(c.width - 1, c.height - 1)}) {
+    const Eigen::Vector2d xy = c.undistortNormalized(Eigen::Vector2d((px.x() - c.cx) / c.fx, (px.y() - c.cy) / c.fy));
+    const Eigen::Vector3d d = pose.linear() * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
+    const double t = d.z() < -1e-6 ? pose.translation().z() / -d.z() : 1e6;
+    const Eigen::Vector3d p = pose.translation() + t * d;
+    r.x_min_m = std::min(r.x_min_m, p.x());
+    r.x_max_m = std::max(r.x_max_m, p.x());
+    r.y_min_m = std::min(r.y_min_m, p.y());
+    r.y_max_m = std::max(r.y_max_m, p.y());
+  }
+  return r;
+}
+
 void DiveSynthesizer::run(const DiveSink& sink) {
   NavigationSensorSimulator nav(config_.navigation, config_.geo, config_.seabed_depth_m, config_.start_time_unix_s,
                                 config_.seed, [this](double x, double y) { return relief_->heightAt_m(x, y); });

@@ -14,6 +14,7 @@
 #include "exocet_mosaic/sim/atomic_file.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_mosaic/sim/image_seabed.h"
 
 namespace {
 
@@ -137,6 +138,15 @@ int run(int argc, char** argv) {
   Seabed seabed = makeSeabed(dive.seabed, dive.synthesis.seed);
   DiveSynthesizer synth(dive.synthesis, seabed.texture.get(), seabed.relief.get());
   const DiveSynthesisConfig& cfg = dive.synthesis;
+  if (const auto* picture = dynamic_cast<const ImageSeabed*>(seabed.texture.get())) {
+    // A picture ends somewhere: refuse a dive that would film past its edge rather than render filler.
+    for (double t = 0.0; t <= synth.duration_s() + 1e-9; t += 0.5) {
+      if (!picture->covers(synth.footprintOnReferencePlane(t)))
+        throw std::invalid_argument("the camera leaves the seabed image '" + dive.seabed.image + "' at t = " +
+                                    std::to_string(t) + " s: enlarge seabed.image_pixel_size_m, move "
+                                    "seabed.image_center_x_m/_y_m or shorten the trajectory");
+    }
+  }
 
   DiveBagWriter::Options options;
   options.image_storage = parseImageStorage(dive.image_storage);

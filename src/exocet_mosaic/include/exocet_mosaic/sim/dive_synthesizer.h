@@ -86,6 +86,8 @@ class DiveSynthesizer {
   SeabedRenderer& renderer() { return renderer_; }
   /// Camera pose in the local frame at dive time t.
   Eigen::Isometry3d cameraPoseLocal(double t_s) const;
+  /// Bounding box (local frame) of the image's footprint on the reference plane at dive time t.
+  WorldRect footprintOnReferencePlane(double t_s) const;
   /// Local frame -> UTM frame.
   Eigen::Vector3d toWorld(const Eigen::Vector3d& local) const;
 
