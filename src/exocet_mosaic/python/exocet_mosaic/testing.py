@@ -1,0 +1,39 @@
+"""Helpers shared by the Python tests of Exocet (rostest checkers): an independent WGS 84 -> UTM conversion to check
+GeographicLib's, and the exact text of a ROS time as the nodes write it."""
+import math
+
+
+def lat_lon_to_utm(lat_deg, lon_deg, zone, northern):
+    """WGS 84 -> UTM by Krueger's series to 6th order in n (Karney 2011): independent of GeographicLib, which the
+    node uses, and accurate to well under a micrometre within a zone and some degrees beyond."""
+    a = 6378137.0
+    f = 1.0 / 298.257223563
+    n = f / (2.0 - f)
+    n2, n3, n4, n5, n6 = n ** 2, n ** 3, n ** 4, n ** 5, n ** 6
+    big_a = a / (1.0 + n) * (1.0 + n2 / 4.0 + n4 / 64.0 + n6 / 256.0)
+    alpha = [
+        n / 2 - 2 * n2 / 3 + 5 * n3 / 16 + 41 * n4 / 180 - 127 * n5 / 288 + 7891 * n6 / 37800,
+        13 * n2 / 48 - 3 * n3 / 5 + 557 * n4 / 1440 + 281 * n5 / 630 - 1983433 * n6 / 1935360,
+        61 * n3 / 240 - 103 * n4 / 140 + 15061 * n5 / 26880 + 167603 * n6 / 181440,
+        49561 * n4 / 161280 - 179 * n5 / 168 + 6601661 * n6 / 7257600,
+        34729 * n5 / 80640 - 3418889 * n6 / 1995840,
+        212378941 * n6 / 319334400,
+    ]
+    e = 2.0 * math.sqrt(n) / (1.0 + n)
+    phi = math.radians(lat_deg)
+    lam = math.radians(lon_deg - (6.0 * zone - 183.0))
+    lam = math.atan2(math.sin(lam), math.cos(lam))
+    t = math.sinh(math.atanh(math.sin(phi)) - e * math.atanh(e * math.sin(phi)))
+    xi_p = math.atan2(t, math.cos(lam))
+    eta_p = math.atanh(math.sin(lam) / math.sqrt(1.0 + t * t))
+    xi, eta = xi_p, eta_p
+    for j, aj in enumerate(alpha, start=1):
+        xi += aj * math.sin(2 * j * xi_p) * math.cosh(2 * j * eta_p)
+        eta += aj * math.cos(2 * j * xi_p) * math.sinh(2 * j * eta_p)
+    k0 = 0.9996
+    return 500000.0 + k0 * big_a * eta, (0.0 if northern else 10000000.0) + k0 * big_a * xi
+
+
+def stamp_text(stamp):
+    """A ROS time as the loggers print it: seconds and nanoseconds, exactly."""
+    return '%d.%09d' % (stamp.secs, stamp.nsecs)
