@@ -20,6 +20,7 @@ constexpr char kNavDatum[] = "/nav/datum";        // exocet_msgs/GeoDatum, latch
 constexpr char kGroundTruthOdometry[] = "/ground_truth/odometry";       // nav_msgs/Odometry, utm -> base_link
 constexpr char kGroundTruthCameraPose[] = "/ground_truth/camera_pose";  // geometry_msgs/PoseStamped, utm
 constexpr char kGroundTruthAltitude[] = "/ground_truth/altitude";      // sensor_msgs/Range, camera optical axis
+constexpr char kMosaicMotion[] = "/mosaic/motion";                        // exocet_msgs/ImageMotion
 constexpr char kTfStatic[] = "/tf_static";                              // tf2_msgs/TFMessage, latched
 
 }  // namespace topics

@@ -1,0 +1,385 @@
+// Benchmark of the frame-to-frame registration (2D3 sections 3.1, 3.2): accuracy against the simulator's ground
+// truth over a 2000-frame dive with turbid and dark stretches, agreement with a SIFT + RANSAC reference on the real
+// Sparus AUV frames, and speed on one thread, side by side with OpenCV's ECC (affine, pyramid) and a feature
+// pipeline (ORB + estimateAffinePartial2D). Writes registration.json (and keeps the keys another bench added).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video.hpp>
+
+#include "exocet_mosaic/registration/registration_config.h"
+#include "exocet_mosaic/registration/sequence_evaluation.h"
+#include "exocet_mosaic/registration/sift_reference.h"
+#include "exocet_mosaic/sim/dive_description.h"
+#include "exocet_mosaic/sim/image_motion_truth.h"
+#include "exocet_mosaic/sim/rendered_dive.h"
+#include "shared_data.h"
+
+namespace {
+
+using namespace exocet_mosaic;
+using namespace exocet_mosaic::registration;
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+Eigen::Matrix3d toEigen(const cv::Mat& m) {
+  Eigen::Matrix3d e = Eigen::Matrix3d::Identity();
+  for (int r = 0; r < m.rows; ++r)
+    for (int c = 0; c < 3; ++c) e(r, c) = m.at<double>(r, c);
+  return e;
+}
+
+// ---- OpenCV peers -------------------------------------------------------------------------------------------------
+
+/// cv::findTransformECC, affine, coarse to fine over a 3-level pyramid (the warp maps A's pixels to B's).
+MotionEstimate eccAffine(const cv::Mat& a, const cv::Mat& b) {
+  const auto start = Clock::now();
+  MotionEstimate e;
+  e.model = MotionModel::kAffine;
+  const int levels = 3;
+  std::vector<cv::Mat> pa{a}, pb{b};
+  for (int l = 1; l < levels; ++l) {
+    cv::Mat da, db;
+    cv::pyrDown(pa.back(), da);
+    cv::pyrDown(pb.back(), db);
+    pa.push_back(da);
+    pb.push_back(db);
+  }
+  cv::Mat warp = cv::Mat::eye(2, 3, CV_32F);
+  warp.at<float>(0, 2) /= float(1 << (levels - 1));
+  try {
+    for (int l = levels - 1; l >= 0; --l) {
+      cv::findTransformECC(pa[l], pb[l], warp, cv::MOTION_AFFINE,
+                           cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 50, 1e-5), cv::noArray(),
+                           3);
+      if (l > 0) {
+        warp.at<float>(0, 2) *= 2.f;
+        warp.at<float>(1, 2) *= 2.f;
+      }
+    }
+    e.failed = false;
+    e.failure = FailureReason::kNone;
+    e.pixel_matrix = Eigen::Matrix3d::Identity();
+    for (int r = 0; r < 2; ++r)
+      for (int c = 0; c < 3; ++c) e.pixel_matrix(r, c) = warp.at<float>(r, c);
+  } catch (const cv::Exception&) {
+    e.failed = true;
+    e.failure = FailureReason::kNotConverged;
+  }
+  e.elapsed_ms = msSince(start);
+  return e;
+}
+
+/// ORB features, cross-checked Hamming matches, cv::estimateAffinePartial2D (RANSAC then refinement).
+MotionEstimate orbPartialAffine(const cv::Mat& a, const cv::Mat& b, cv::Ptr<cv::ORB>& orb) {
+  const auto start = Clock::now();
+  MotionEstimate e;
+  e.model = MotionModel::kSimilarity;
+  std::vector<cv::KeyPoint> ka, kb;
+  cv::Mat da, db;
+  orb->detectAndCompute(a, cv::noArray(), ka, da);
+  orb->detectAndCompute(b, cv::noArray(), kb, db);
+  std::vector<cv::DMatch> matches;
+  if (!da.empty() && !db.empty()) cv::BFMatcher(cv::NORM_HAMMING, true).match(da, db, matches);
+  std::vector<cv::Point2f> pa, pb;
+  for (const cv::DMatch& m : matches) {
+    pa.push_back(ka[m.queryIdx].pt);
+    pb.push_back(kb[m.trainIdx].pt);
+  }
+  cv::Mat m;
+  if (pa.size() >= 10) m = cv::estimateAffinePartial2D(pa, pb, cv::noArray(), cv::RANSAC, 2.0);
+  e.failed = m.empty();
+  e.failure = e.failed ? FailureReason::kTooFewInliers : FailureReason::kNone;
+  if (!e.failed) e.pixel_matrix = toEigen(m);
+  e.elapsed_ms = msSince(start);
+  return e;
+}
+
+// ---- Helpers ------------------------------------------------------------------------------------------------------
+
+RegistrationConfig configFor(RegistrationMethod method, MotionModel model) {
+  RegistrationConfig c;
+  c.method = method;
+  c.model = model;
+  return c;
+}
+
+/// Frames per second of registerNext over `frames`, repeated until at least `min_seconds` have passed.
+double speed(RegistrationMethod method, MotionModel model, const std::vector<cv::Mat>& frames, double min_seconds) {
+  std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(method, model));
+  int count = 0;
+  const auto start = Clock::now();
+  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
+  do {
+    r->reset();
+    for (const cv::Mat& f : frames) {
+      const MotionEstimate e = r->registerNext(f, prediction);
+      prediction = e.failed ? Eigen::Matrix3d::Identity() : e.pixel_matrix;
+      ++count;
+    }
+  } while (msSince(start) < 1000.0 * min_seconds);
+  return 1000.0 * count / msSince(start);
+}
+
+template <typename Peer>
+SequenceScore peerScore(const std::vector<cv::Mat>& frames, const std::vector<Eigen::Matrix3d>& truth, int stride,
+                        Peer peer) {
+  std::vector<PairScore> pairs;
+  for (size_t i = stride; i < frames.size(); i += stride) {
+    const MotionEstimate e = peer(frames[i - 1], frames[i]);
+    PairScore s;
+    s.index = int(i);
+    s.failed = e.failed;
+    s.elapsed_ms = e.elapsed_ms;
+    s.corner_error_px =
+        e.failed ? std::nan("") : cornerTransferError_px(e.pixel_matrix, truth[i], frames[i].cols, frames[i].rows);
+    s.corner_nees = std::nan("");
+    pairs.push_back(s);
+  }
+  return summarize(pairs);
+}
+
+struct Json {
+  std::map<std::string, std::string> values;
+  void set(const std::string& key, double v) {
+    std::ostringstream s;
+    if (std::isfinite(v))
+      s << std::setprecision(6) << v;
+    else
+      s << "null";
+    values[key] = s.str();
+  }
+  void setText(const std::string& key, const std::string& v) { values[key] = "\"" + v + "\""; }
+  /// Keeps the keys of an existing file (bench_registration_node adds node_peak_rss_mb).
+  void merge(const std::string& path) {
+    std::ifstream in(path);
+    std::string line;
+    while (std::getline(in, line)) {
+      const size_t q1 = line.find('"'), q2 = line.find('"', q1 + 1), colon = line.find(':', q2 + 1);
+      if (q1 == std::string::npos || q2 == std::string::npos || colon == std::string::npos) continue;
+      const std::string key = line.substr(q1 + 1, q2 - q1 - 1);
+      std::string value = line.substr(colon + 1);
+      while (!value.empty() && (value.back() == ',' || value.back() == ' ')) value.pop_back();
+      while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+      if (!values.count(key)) values[key] = value;
+    }
+  }
+  bool write(const std::string& path) const {
+    std::ofstream out(path);
+    out << "{\n";
+    size_t i = 0;
+    for (const auto& [k, v] : values) out << "  \"" << k << "\": " << v << (++i < values.size() ? ",\n" : "\n");
+    out << "}\n";
+    return bool(out);
+  }
+};
+
+void printRow(const std::string& name, const SequenceScore& s, double fps, double ratio_ecc, double ratio_features) {
+  std::cout << std::left << std::setw(30) << name << std::right << std::fixed << std::setprecision(3) << std::setw(9)
+            << s.median_px << std::setw(9) << s.p95_px << std::setprecision(2) << std::setw(9)
+            << 100.0 * s.failure_rate << std::setw(9) << 100.0 * s.gross_failure_rate << std::setprecision(0)
+            << std::setw(9) << fps;
+  if (ratio_ecc > 0) std::cout << std::setprecision(1) << std::setw(9) << ratio_ecc << std::setw(9) << ratio_features;
+  std::cout << "\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string out_dir = "out/bench", shared = "../shared/data", config_dir = EXOCET_CONFIG_DIR;
+  int frames_limit = 0;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string a = argv[i];
+    if (a == "--output-dir") out_dir = argv[i + 1];
+    else if (a == "--shared-data") shared = argv[i + 1];
+    else if (a == "--frames") frames_limit = std::stoi(argv[i + 1]);
+    else {
+      std::cerr << "usage: bench_registration [--output-dir DIR] [--shared-data DIR] [--frames N]\n";
+      return 2;
+    }
+  }
+  cv::setNumThreads(1);
+  Json json;
+  json.merge(out_dir + "/registration.json");
+
+  // ---- 1. Accuracy on the simulated dive ----
+  std::vector<std::string> overrides;
+  if (frames_limit > 0) overrides.push_back("duration_s=" + std::to_string(frames_limit / 25.0 - 0.01));
+  const sim::DiveDescription dive =
+      sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml", overrides);
+  auto t0 = Clock::now();
+  const sim::RenderedDive pal = sim::renderDiveCached(dive, 2, out_dir + "/cache");
+  std::cout << "rendered " << pal.gray.size() << " PAL frames in " << msSince(t0) / 1000.0 << " s\n";
+  std::vector<Eigen::Matrix3d> truth(pal.gray.size(), Eigen::Matrix3d::Identity());
+  for (size_t i = 1; i < pal.gray.size(); ++i)
+    truth[i] = sim::seabedPlaneHomography(pal.camera, pal.local_from_camera[i - 1], pal.local_from_camera[i]);
+
+  struct Candidate {
+    std::string key;
+    RegistrationMethod method;
+    MotionModel model;
+  };
+  const std::vector<Candidate> candidates = {
+      {"klt", RegistrationMethod::kKlt, MotionModel::kHomography},
+      {"rmr", RegistrationMethod::kRmr, MotionModel::kHomography},
+      {"auto", RegistrationMethod::kAuto, MotionModel::kHomography},
+      {"klt_similarity", RegistrationMethod::kKlt, MotionModel::kSimilarity},
+      {"rmr_similarity", RegistrationMethod::kRmr, MotionModel::kSimilarity},
+      {"klt_affine", RegistrationMethod::kKlt, MotionModel::kAffine},
+      {"rmr_affine", RegistrationMethod::kRmr, MotionModel::kAffine},
+  };
+  std::map<std::string, SequenceScore> scores;
+  for (const Candidate& c : candidates) {
+    std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(c.method, c.model));
+    scores[c.key] = evaluateSequence(*r, pal.gray, truth);
+    const auto dark = [&](int i) { return pal.light_gain[i] < 1.0; };
+    const auto turbid = [&](int i) { return pal.turbidity[i] > 1.0; };
+    const SequenceScore s_dark = evaluateSequence(*r, pal.gray, truth, 2.0, dark);
+    const SequenceScore s_turbid = evaluateSequence(*r, pal.gray, truth, 2.0, turbid);
+    json.set(c.key + "_median_px", scores[c.key].median_px);
+    json.set(c.key + "_p95_px", scores[c.key].p95_px);
+    json.set(c.key + "_failure_rate", scores[c.key].failure_rate);
+    json.set(c.key + "_gross_failure_rate", scores[c.key].gross_failure_rate);
+    json.set(c.key + "_nees_ratio", scores[c.key].nees_ratio);
+    json.set(c.key + "_dark_median_px", s_dark.median_px);
+    json.set(c.key + "_turbid_median_px", s_turbid.median_px);
+    std::cout << c.key << ": median " << scores[c.key].median_px << " px, p95 " << scores[c.key].p95_px
+              << " px, max " << scores[c.key].max_px << ", failed " << scores[c.key].failures << ", gross "
+              << scores[c.key].gross_failures << ", NEES ratio " << scores[c.key].nees_ratio << "; dark median "
+              << s_dark.median_px << " (" << s_dark.failures << " failed), turbid median " << s_turbid.median_px
+              << " (" << s_turbid.failures << " failed)\n";
+  }
+  json.set("dive_pairs", double(pal.gray.size() - 1));
+  json.set("gross_failure_rate", std::max(scores["klt"].gross_failure_rate, scores["rmr"].gross_failure_rate));
+  json.set("auto_gross_failure_rate", scores["auto"].gross_failure_rate);
+
+  // Peers on every 5th pair (they are slow).
+  cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
+  const SequenceScore ecc = peerScore(pal.gray, truth, 5, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
+  const SequenceScore features =
+      peerScore(pal.gray, truth, 5, [&](const cv::Mat& a, const cv::Mat& b) { return orbPartialAffine(a, b, orb); });
+  json.set("ecc_median_px", ecc.median_px);
+  json.set("ecc_p95_px", ecc.p95_px);
+  json.set("ecc_failure_rate", ecc.failure_rate);
+  json.set("ecc_gross_failure_rate", ecc.gross_failure_rate);
+  json.set("features_median_px", features.median_px);
+  json.set("features_p95_px", features.p95_px);
+  json.set("features_failure_rate", features.failure_rate);
+  json.set("features_gross_failure_rate", features.gross_failure_rate);
+
+  // ---- 2. Speed, one thread ----
+  const std::vector<cv::Mat> pal_clip(pal.gray.begin(), pal.gray.begin() + std::min<size_t>(300, pal.gray.size()));
+  std::map<std::string, double> fps;
+  fps["klt"] = speed(RegistrationMethod::kKlt, MotionModel::kSimilarity, pal_clip, 3.0);
+  fps["rmr"] = speed(RegistrationMethod::kRmr, MotionModel::kSimilarity, pal_clip, 3.0);
+  fps["klt_homography"] = speed(RegistrationMethod::kKlt, MotionModel::kHomography, pal_clip, 2.0);
+  fps["rmr_homography"] = speed(RegistrationMethod::kRmr, MotionModel::kHomography, pal_clip, 2.0);
+  fps["auto"] = speed(RegistrationMethod::kAuto, MotionModel::kSimilarity, pal_clip, 2.0);
+  const double ecc_fps = ecc.fps, features_fps = features.fps;
+  json.set("klt_fps_pal", fps["klt"]);
+  json.set("rmr_fps_pal", fps["rmr"]);
+  json.set("klt_homography_fps_pal", fps["klt_homography"]);
+  json.set("rmr_homography_fps_pal", fps["rmr_homography"]);
+  json.set("auto_fps_pal", fps["auto"]);
+  json.set("ecc_fps_pal", ecc_fps);
+  json.set("features_fps_pal", features_fps);
+
+  {
+    t0 = Clock::now();
+    const sim::DiveDescription hd_dive = sim::loadDiveDescription(
+        config_dir + "/dives/bench_registration.yaml", {"camera.preset=hd", "duration_s=2.39"});
+    const sim::RenderedDive hd = sim::renderDiveCached(hd_dive, 2, out_dir + "/cache");
+    std::cout << "rendered " << hd.gray.size() << " HD frames in " << msSince(t0) / 1000.0 << " s\n";
+    json.set("klt_fps_hd", speed(RegistrationMethod::kKlt, MotionModel::kSimilarity, hd.gray, 3.0));
+    json.set("rmr_fps_hd", speed(RegistrationMethod::kRmr, MotionModel::kSimilarity, hd.gray, 3.0));
+    std::vector<Eigen::Matrix3d> hd_truth(hd.gray.size(), Eigen::Matrix3d::Identity());
+    for (size_t i = 1; i < hd.gray.size(); ++i)
+      hd_truth[i] = sim::seabedPlaneHomography(hd.camera, hd.local_from_camera[i - 1], hd.local_from_camera[i]);
+    const SequenceScore hd_ecc =
+        peerScore(hd.gray, hd_truth, 10, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
+    json.set("ecc_fps_hd", hd_ecc.fps);
+  }
+
+  // ---- 3. Real seabed: Sparus AUV frames against SIFT + RANSAC ----
+  // Undistorted with the dataset's intrinsics, as registration_node does with a camera_info.
+  const std::vector<cv::Mat> sparus = testing_data::loadSparusFrames(shared, true);
+  double sparus_max = 0.0;
+  if (sparus.size() >= 2) {
+    for (const std::string key : {"klt", "rmr"}) {
+      std::unique_ptr<FrameRegistrar> r = makeRegistrar(
+          configFor(key == "klt" ? RegistrationMethod::kKlt : RegistrationMethod::kRmr, MotionModel::kHomography));
+      std::vector<double> errors;
+      int failed = 0;
+      for (size_t i = 0; i < sparus.size(); ++i) {
+        const MotionEstimate e = r->registerNext(sparus[i]);
+        if (i == 0) continue;
+        const SiftReference reference = siftReferenceHomography(sparus[i - 1], sparus[i]);
+        if (!reference.found) continue;
+        if (e.failed) {
+          ++failed;
+          continue;
+        }
+        errors.push_back(cornerTransferError_px(e.pixel_matrix, reference.pixel_matrix, sparus[i].cols, sparus[i].rows));
+      }
+      std::sort(errors.begin(), errors.end());
+      const double worst = errors.empty() ? std::nan("") : errors.back();
+      const double median = errors.empty() ? std::nan("") : errors[errors.size() / 2];
+      sparus_max = std::max(sparus_max, worst);
+      json.set("sparus_" + key + "_max_corner_px", worst);
+      json.set("sparus_" + key + "_median_corner_px", median);
+      json.set("sparus_" + key + "_failures", failed);
+      std::cout << "sparus " << key << ": " << errors.size() << " pairs, corner difference to SIFT+RANSAC median "
+                << median << " px, max " << worst << " px, " << failed << " failed\n";
+    }
+    json.set("sparus_max_corner_px", sparus_max);
+  } else {
+    std::cout << "sparus: no frames under " << shared << "/sparus_auv/frames\n";
+  }
+
+  // ---- Table ----
+  json.set("klt_median_px", scores["klt"].median_px);
+  json.set("klt_p95_px", scores["klt"].p95_px);
+  json.set("rmr_median_px", scores["rmr"].median_px);
+  json.set("rmr_p95_px", scores["rmr"].p95_px);
+  std::cout << "\nRegistration, simulated dive of " << pal.gray.size() << " PAL frames (turbid and dark stretches); "
+            << "speed on one thread, 720x576:\n"
+            << std::left << std::setw(30) << "method" << std::right << std::setw(9) << "med px" << std::setw(9)
+            << "p95 px" << std::setw(9) << "fail %" << std::setw(9) << "gross %" << std::setw(9) << "fps"
+            << std::setw(9) << "x ECC" << std::setw(9) << "x ORB" << "\n";
+  printRow("KLT homography", scores["klt"], fps["klt_homography"], fps["klt_homography"] / ecc_fps,
+           fps["klt_homography"] / features_fps);
+  printRow("RMR homography", scores["rmr"], fps["rmr_homography"], fps["rmr_homography"] / ecc_fps,
+           fps["rmr_homography"] / features_fps);
+  printRow("KLT similarity", scores["klt_similarity"], fps["klt"], fps["klt"] / ecc_fps, fps["klt"] / features_fps);
+  printRow("RMR similarity", scores["rmr_similarity"], fps["rmr"], fps["rmr"] / ecc_fps, fps["rmr"] / features_fps);
+  printRow("auto (KLT, then RMR) homog.", scores["auto"], fps["auto"], fps["auto"] / ecc_fps,
+           fps["auto"] / features_fps);
+  printRow("KLT affine", scores["klt_affine"], 0, 0, 0);
+  printRow("RMR affine", scores["rmr_affine"], 0, 0, 0);
+  printRow("OpenCV ECC affine pyramid", ecc, ecc_fps, 1.0, ecc_fps / features_fps);
+  printRow("ORB + estimateAffinePartial2D", features, features_fps, features_fps / ecc_fps, 1.0);
+
+  const std::string path = out_dir + "/registration.json";
+  if (!json.write(path)) {
+    std::cerr << "bench_registration: cannot write " << path << "\n";
+    return 1;
+  }
+  std::cout << "wrote " << path << "\n";
+  return 0;
+}

@@ -1,0 +1,168 @@
+/**
+ * @file klt_registrar.h
+ * @brief The KLT registration method (2D3 report, 3.1): Shi-Tomasi features spread over the image, tracked by
+ * pyramidal Lucas-Kanade with a forward-backward check, and a robust least-squares fit of the motion model to the
+ * tracks. No ROS in it.
+ *
+ * Per image, registerNext() builds the image's pyramid (with its derivatives) once; it serves as the "current"
+ * pyramid of this pair, and as the "previous" one of the next pair. Features live from image to image: the inlier
+ * tracks of a pair are the features of the next pair, and new ones are detected (in the empty grid cells only, on a
+ * coarse pyramid level) when the set thins out, so that detection is amortised over several images.
+ */
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "exocet_mosaic/registration/frame_registrar.h"
+#include "exocet_mosaic/registration/motion_estimate.h"
+#include "exocet_mosaic/registration/motion_model.h"
+#include "exocet_mosaic/registration/robust_motion_fitter.h"
+
+namespace exocet_mosaic {
+namespace registration {
+
+/// Parameters of the KLT registration. Distances are in pixels of the full-resolution image. validate() lists the
+/// allowed ranges.
+struct KltConfig {
+  MotionModel model = MotionModel::kSimilarity;  ///< the report's 4-parameter model by default
+
+  // --- Feature detection (Shi-Tomasi: both eigenvalues of the gradient matrix large) ---
+  int max_features = 150;            ///< [8, 5000]; at most max_features / (grid_cols * grid_rows) per grid cell
+  int grid_cols = 8;                 ///< grid that spreads the features over the image, [1, 64]
+  int grid_rows = 6;                 ///< [1, 64]
+  double min_distance_px = 12.0;     ///< between two features, [1, 200]
+  double quality_level = 0.02;       ///< a corner must reach this fraction of the strongest one, [0, 1)
+  double min_eigenvalue = 2e-4;      ///< absolute floor of the smaller eigenvalue (cv::cornerMinEigenVal units), [0, 1]
+  int block_size = 5;                ///< gradient window of the detector (pixels of the detection level), odd [3, 15]
+  int detection_max_width_px = 480;  ///< detect on the finest pyramid level at most this wide, [64, 100000]
+  int min_features = 20;             ///< fewer features in an image: too little texture, [1, max_features]
+  /// Detect again when the tracked features or the grid cells holding one fall below this fraction of what the last
+  /// detection left, [0, 1] (0: only when a registration failed).
+  double redetect_fraction = 0.75;
+
+  // --- Tracking (pyramidal Lucas-Kanade) ---
+  int window_px = 11;            ///< side of the tracking window, odd [5, 63]
+  int pyramid_levels = 3;        ///< levels including the full resolution, [1, 8]
+  int lk_max_iterations = 20;    ///< per level, [1, 100]
+  double lk_epsilon_px = 0.03;   ///< per level: stop when the update is smaller, (0, 1]
+  double fb_threshold_px = 0.5;  ///< largest forward-backward distance of a kept track, (0, 20]
+  /// Compute the image derivatives only around the points to track, not over whole pyramid levels: the same values
+  /// (so the same tracks, bit for bit) at a fraction of the cost on large images. false: whole levels, as
+  /// cv::buildOpticalFlowPyramid does.
+  bool derivatives_on_demand = true;
+  int min_tracks = 15;  ///< fewer tracks kept: failure kTooFewTracks, [minimal points of the model, 5000]
+
+  // --- Robust fit and acceptance ---
+  int min_inliers = 12;                 ///< [minimal points of the model, 5000]
+  double min_inlier_fraction = 0.5;     ///< of the kept tracks, [0, 1]
+  double rejection_k = 4.0;             ///< a track is struck off beyond rejection_k * sigma, [2, 20]
+  double min_residual_scale_px = 0.03;  ///< floor of sigma (covariance, rejection), (0, 10]
+  double max_residual_px = 1.0;         ///< larger inlier residual scale: failure kInconsistent, (0, 100]
+  double max_motion_fraction = 0.5;     ///< an image corner moving further than this fraction of the image's smaller
+                                        ///< side: failure kMotionTooLarge, (0, 10]
+
+  // --- Image quality (measured on the coarsest pyramid level) ---
+  double min_mean_grey = 12.0;     ///< darker on average: failure kTooDark, [0, 255]
+  double min_contrast_grey = 2.0;  ///< smaller grey-level standard deviation: failure kTooDark, [0, 128]
+
+  /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
+  std::string validate() const;
+  /// The robust fitter's parameters that this configuration implies.
+  RobustFitConfig fitConfig() const;
+};
+
+/// What the last registerNext() / registerPair() call did (for benchmarks and diagnostics).
+struct KltDiagnostics {
+  int features = 0;         ///< features of the previous image that were tracked
+  int tracked = 0;          ///< tracks that converged, stayed in the image and passed the forward-backward check
+  int detected = 0;         ///< new features detected in the current image (0 if there was no detection)
+  double pyramid_ms = 0.0;  ///< building the current image's pyramid
+  double track_ms = 0.0;    ///< forward and backward Lucas-Kanade
+  double fit_ms = 0.0;      ///< robust fit
+  double detect_ms = 0.0;   ///< feature detection (topping up the empty cells)
+};
+
+/**
+ * @brief Frame-to-frame registration by feature tracking (KLT). One instance per image stream; not thread-safe.
+ *
+ * Failures are explicit: kTooDark (mean or contrast of either image below the thresholds), kTooLittleTexture (fewer
+ * than min_features found in the previous image), kTooFewTracks, kTooFewInliers, kMotionTooLarge, kInconsistent
+ * (residual scale above max_residual_px, degenerate fit), kNotConverged, kInvalidInput (type or size).
+ */
+class KltRegistrar : public FrameRegistrar {
+ public:
+  /// @throws std::invalid_argument with config.validate()'s message.
+  explicit KltRegistrar(const KltConfig& config = KltConfig());
+
+  void reset() override;
+  MotionEstimate registerNext(const cv::Mat& gray,
+                              const Eigen::Matrix3d& prediction_px = Eigen::Matrix3d::Identity()) override;
+  MotionEstimate registerPair(const cv::Mat& previous, const cv::Mat& current,
+                              const Eigen::Matrix3d& prediction_px = Eigen::Matrix3d::Identity()) override;
+  RegistrationMethod method() const override { return RegistrationMethod::kKlt; }
+
+  const KltConfig& config() const { return config_; }
+  const KltDiagnostics& lastDiagnostics() const { return diagnostics_; }
+  /// Features held for the next registerNext() call (pixels of the last image).
+  const std::vector<cv::Point2f>& features() const { return previous_.features; }
+
+ private:
+  /// One prepared image: its pyramid (with derivatives), its quality, its features.
+  struct Frame {
+    std::vector<cv::Mat> pyramid;  ///< cv::buildOpticalFlowPyramid's layout: level L image at 2L, derivatives at 2L+1
+    int max_level = 0;             ///< coarsest level built
+    // derivatives_on_demand: the images, and the bordered buffers whose interiors are pyramid[2L + 1]; the
+    // derivatives are valid around every point of `features` (and wholly on the levels flagged in complete_levels).
+    std::vector<cv::Mat> images;
+    std::vector<cv::Mat> derivative_buffers;
+    unsigned complete_levels = 0;
+    cv::Size size;
+    bool usable = false;          ///< bright and contrasted enough
+    std::string unusable_detail;  ///< why not
+    std::vector<cv::Point2f> features;
+    int detected_cells = 0;         ///< grid cells holding a feature after the last detection
+    int detected_features = 0;      ///< features after the last detection
+    float strongest_corner = 0.0f;  ///< largest detector response seen (reference of quality_level)
+  };
+
+  void prepare(const cv::Mat& gray, Frame* frame);
+  /// derivatives_on_demand: computes the derivatives around points[first...] on every level of `frame`.
+  void computeDerivatives(Frame* frame, const std::vector<cv::Point2f>& points, size_t first = 0);
+  /// Detects features in the empty cells of `frame` (all cells if `frame` has none), keeping the existing ones.
+  void topUpFeatures(Frame* frame);
+  /// Whether the surviving tracks have thinned out enough to detect again.
+  bool needsDetection(const Frame& frame) const;
+  void estimate(const Frame& previous, Frame* current, const Eigen::Matrix3d& prediction_px, MotionEstimate* result);
+  MotionEstimate emptyEstimate(const cv::Size& size) const;
+
+  KltConfig config_;
+  RobustMotionFitter fitter_;
+  cv::Size window_;
+  Frame previous_, current_;
+  bool has_previous_ = false;
+  KltDiagnostics diagnostics_;
+
+  // Scratch buffers, kept to avoid allocations per image.
+  std::vector<cv::Point2f> forward_, backward_, from_, to_;
+  std::vector<uchar> status_, back_status_;
+  std::vector<float> error_;
+  std::vector<int> kept_;
+  cv::Mat eigen_;
+  std::vector<cv::Rect> rois_;
+  std::vector<int16_t> scharr_rows_;
+  std::vector<int> cell_count_, occupancy_head_, occupancy_next_;
+  struct Candidate {
+    float strength;
+    float x, y;
+    int cell;
+  };
+  std::vector<Candidate> candidates_;
+};
+
+}  // namespace registration
+}  // namespace exocet_mosaic

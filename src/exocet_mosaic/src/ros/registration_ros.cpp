@@ -1,0 +1,326 @@
+#include "exocet_mosaic/ros/registration_ros.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include <cv_bridge/cv_bridge.h>
+#include <image_transport/camera_common.h>
+#include <exocet_msgs/ImageMotion.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_mosaic/ros/registration_parameters.h"
+
+namespace exocet_mosaic {
+
+using diagnostic_msgs::DiagnosticStatus;
+namespace reg = registration;
+
+RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private_nh) {
+  RegistrationNodeConfig config;
+  config.registration = readRegistrationConfig(private_nh);
+  const ParameterReader params(private_nh);
+  params.readTopic("image_topic", &config.image_topic);
+  params.readString("transport", &config.transport, {"auto", "raw", "compressed"},
+                    "which image topic to listen to: raw (image_transport), compressed (<image_topic>/compressed, "
+                    "decoded here) or auto (the first that delivers)");
+  params.readTopic("motion_topic", &config.motion_topic);
+  config.camera_info_topic = image_transport::getCameraInfoTopic(config.image_topic);
+  params.readTopic("camera_info_topic", &config.camera_info_topic);
+  params.readBool("undistort", &config.undistort,
+                  "undistort the images with the camera_info's distortion coefficients before registering them");
+  params.readPositiveDouble("max_gap_s", &config.max_gap_s, 3600.0,
+                            "seconds between two images beyond which the sequence restarts");
+  params.readInt("queue_size", &config.queue_size, 1, 1000, "images waiting to be registered");
+  params.readDouble("expected_rate_hz", &config.expected_rate_hz, 0.0, 1000.0,
+                    "nominal camera frame rate for /diagnostics, 0 when unknown");
+  params.readInt("quality_window", &config.quality_window, 5, 10000,
+                 "image pairs over which /diagnostics computes the failure fraction");
+  params.readPositiveDouble("warn_failure_fraction", &config.warn_failure_fraction, 1.0,
+                            "fraction of failed pairs above which /diagnostics warns");
+  return config;
+}
+
+RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
+    : nh_(nh), private_nh_(private_nh), config_(readRegistrationNodeConfig(private_nh)), image_transport_(nh) {
+  registrar_ = reg::makeRegistrar(config_.registration);
+  motion_publisher_ = nh_.advertise<exocet_msgs::ImageMotion>(config_.motion_topic, 100);
+  if (config_.transport != "compressed")
+    raw_subscriber_ = image_transport_.subscribe(config_.image_topic, config_.queue_size, &RegistrationRos::onImage,
+                                                 this, image_transport::TransportHints("raw"));
+  if (config_.transport != "raw")
+    compressed_subscriber_ = nh_.subscribe(config_.image_topic + "/compressed", config_.queue_size,
+                                           &RegistrationRos::onCompressed, this);
+
+  camera_info_subscriber_ = nh_.subscribe(config_.camera_info_topic, 5, &RegistrationRos::onCameraInfo, this);
+
+  updater_.setHardwareID("registration " + reg::toString(config_.registration.method));
+  min_rate_hz_ = config_.expected_rate_hz > 0.0 ? 0.5 * config_.expected_rate_hz : 0.0;
+  max_rate_hz_ = config_.expected_rate_hz > 0.0 ? 2.0 * config_.expected_rate_hz : 1e9;
+  image_rate_ = std::make_unique<diagnostic_updater::FrequencyStatus>(
+      diagnostic_updater::FrequencyStatusParam(&min_rate_hz_, &max_rate_hz_, 0.1, 10), "images");
+  updater_.add(*image_rate_);
+  updater_.add("registration", this, &RegistrationRos::diagnose);
+  // Wall-clock timer: /diagnostics goes on when a replay pauses or its clock jumps back.
+  const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
+  diagnostics_timer_ =
+      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.update(); });
+  ROS_INFO("registration: method %s, model %s, listening to %s (%s), publishing %s",
+           reg::toString(config_.registration.method).c_str(), reg::toString(config_.registration.model).c_str(),
+           config_.image_topic.c_str(), config_.transport.c_str(), config_.motion_topic.c_str());
+}
+
+bool RegistrationRos::acceptTransport(const std::string& transport) {
+  if (active_transport_.empty()) {
+    active_transport_ = transport;
+    ROS_INFO("registration: receiving %s images", transport.c_str());
+    // Only one stream may feed the sequence: the other would register each image against itself.
+    if (transport == "raw")
+      compressed_subscriber_.shutdown();
+    else
+      raw_subscriber_.shutdown();
+  }
+  return active_transport_ == transport;
+}
+
+void RegistrationRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
+  if (!acceptTransport("raw")) return;
+  cv_bridge::CvImageConstPtr cv_image;
+  try {
+    cv_image = cv_bridge::toCvShare(msg);
+  } catch (const std::exception& e) {
+    reject("image with encoding '" + msg->encoding + "' cannot be read: " + e.what());
+    return;
+  }
+  process(cv_image->image, msg->encoding, msg->header);
+}
+
+void RegistrationRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg) {
+  if (!acceptTransport("compressed")) return;
+  cv::Mat decoded;
+  try {
+    decoded = cv::imdecode(msg->data, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    decoded.release();
+  }
+  if (decoded.empty()) {
+    reject("compressed image (format '" + msg->format + "', " + std::to_string(msg->data.size()) +
+           " bytes) cannot be decoded");
+    return;
+  }
+  // The format field starts with the original encoding ("bgr8; jpeg compressed bgr8"); a Bayer image compressed
+  // losslessly decodes to one channel and must be demosaiced as such.
+  std::string encoding = msg->format.substr(0, msg->format.find(';'));
+  encoding.erase(std::remove(encoding.begin(), encoding.end(), ' '), encoding.end());
+  const bool bayer = encoding.rfind("bayer_", 0) == 0 && decoded.channels() == 1;
+  if (!bayer) {
+    switch (decoded.type()) {
+      case CV_8UC1:
+        encoding = "mono8";
+        break;
+      case CV_16UC1:
+        encoding = "mono16";
+        break;
+      case CV_8UC3:
+        encoding = "bgr8";  // imdecode's order
+        break;
+      case CV_8UC4:
+        encoding = "bgra8";
+        break;
+      default:
+        reject("compressed image (format '" + msg->format + "') decodes to an unsupported pixel type");
+        return;
+    }
+  }
+  process(decoded, encoding, msg->header);
+}
+
+void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+  camera_info_ = msg;
+}
+
+void RegistrationRos::reject(const std::string& why) {
+  ++rejected_;
+  last_problem_ = why;
+  ROS_ERROR_THROTTLE(5.0, "registration: skipping an image: %s", why.c_str());
+}
+
+void RegistrationRos::restart(const std::string& why) {
+  ++restarts_;
+  last_problem_ = why;
+  ROS_WARN_THROTTLE(5.0, "registration: restarting the sequence: %s", why.c_str());
+  registrar_->reset();
+  have_previous_ = false;
+  last_motion_ = reg::MotionEstimate();
+}
+
+void RegistrationRos::process(const cv::Mat& image, const std::string& encoding, const std_msgs::Header& header) {
+  ++images_;
+  image_rate_->tick();
+  cv::Mat gray;
+  try {
+    gray = converter_.convert(image, encoding);
+  } catch (const std::invalid_argument& e) {
+    reject(e.what());
+    return;
+  }
+  if (header.stamp.isZero()) {
+    reject("image with a zero stamp: the motion would have no time");
+    return;
+  }
+  if (config_.undistort && camera_info_) {
+    const sensor_msgs::CameraInfo& info = *camera_info_;
+    const cv::Size info_size(int(info.width), int(info.height));
+    std::array<double, 9> k{};
+    std::array<double, 5> d{};
+    std::copy(info.K.begin(), info.K.end(), k.begin());
+    for (size_t i = 0; i < std::min<size_t>(5, info.D.size()); ++i) d[i] = info.D[i];
+    if (info.distortion_model != "plumb_bob" && info.distortion_model != "rational_polynomial" &&
+        !info.distortion_model.empty()) {
+      last_problem_ = "camera_info distortion model '" + info.distortion_model + "' is not supported (plumb_bob)";
+      ROS_WARN_THROTTLE(30.0, "registration: %s; registering the images as they are", last_problem_.c_str());
+    } else if (info_size == gray.size() && !undistorter_.sameCalibration(info_size, k, d)) {
+      try {
+        undistorter_ = reg::ImageUndistorter(info_size, k, d);
+        if (have_previous_) restart("the camera calibration changed");
+        ROS_INFO("registration: %s", undistorter_.active() ? "undistorting the images with the camera_info"
+                                                           : "the camera_info has no distortion");
+      } catch (const std::invalid_argument& e) {
+        last_problem_ = std::string("camera_info unusable: ") + e.what();
+        ROS_WARN_THROTTLE(30.0, "registration: %s", last_problem_.c_str());
+      }
+    }
+  }
+  if (undistorter_.active()) {
+    if (gray.size() == undistorter_.size()) {
+      gray = undistorter_.apply(gray);
+    } else {
+      ROS_WARN_THROTTLE(30.0, "registration: image size %dx%d differs from the camera_info's %dx%d: not undistorted",
+                        gray.cols, gray.rows, undistorter_.size().width, undistorter_.size().height);
+    }
+  }
+
+  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
+  double period_s = 0.0;
+  if (have_previous_) {
+    period_s = (header.stamp - previous_stamp_).toSec();
+    std::ostringstream why;
+    if (period_s <= 0.0) {
+      why << "image stamps went back by " << -period_s << " s (bag replayed again or clock jump)";
+      restart(why.str());
+    } else if (period_s > config_.max_gap_s) {
+      why << "gap of " << period_s << " s between images exceeds ~max_gap_s = " << config_.max_gap_s << " s";
+      restart(why.str());
+    } else if (gray.size() != previous_size_) {
+      why << "image size changed from " << previous_size_.width << "x" << previous_size_.height << " to "
+          << gray.cols << "x" << gray.rows;
+      restart(why.str());
+    } else if (!last_motion_.failed && previous_period_s_ > 0.0) {
+      // Constant velocity: the previous motion scaled to this interval bridges dropped frames.
+      const double ratio = std::min(period_s / previous_period_s_, 4.0);
+      prediction = reg::pixelMatrix(last_motion_.model, ratio * last_motion_.parameters, last_motion_.centre_px);
+    }
+  }
+  if (!have_previous_) {
+    registrar_->reset();
+    registrar_->registerNext(gray);  // keeps the image as the first of the next pair
+    have_previous_ = true;
+    previous_stamp_ = header.stamp;
+    previous_size_ = gray.size();
+    previous_period_s_ = 0.0;
+    return;
+  }
+
+  const reg::MotionEstimate estimate = registrar_->registerNext(gray, prediction);
+  exocet_msgs::ImageMotion msg;
+  msg.header = header;
+  msg.previous_stamp = previous_stamp_;
+  msg.method = reg::toString(estimate.method);
+  msg.model = reg::toString(estimate.model);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) msg.matrix[3 * r + c] = estimate.failed ? double(r == c) : estimate.pixel_matrix(r, c);
+  msg.centre_px[0] = estimate.centre_px.x();
+  msg.centre_px[1] = estimate.centre_px.y();
+  if (!estimate.failed) {
+    msg.parameters.assign(estimate.parameters.data(), estimate.parameters.data() + estimate.parameters.size());
+    const Eigen::MatrixXd cov = estimate.covariance;
+    for (int r = 0; r < cov.rows(); ++r)
+      for (int c = 0; c < cov.cols(); ++c) msg.covariance.push_back(cov(r, c));
+  }
+  msg.failed = estimate.failed;
+  msg.failure = reg::toString(estimate.failure);
+  msg.failure_detail = estimate.failure_detail;
+  msg.observations = estimate.observations;
+  msg.inliers = estimate.inliers;
+  msg.inlier_fraction = static_cast<float>(estimate.inlier_fraction);
+  msg.residual_scale = static_cast<float>(estimate.residual_scale);
+  msg.processing_ms = static_cast<float>(estimate.elapsed_ms);
+  msg.image_width = static_cast<uint32_t>(gray.cols);
+  msg.image_height = static_cast<uint32_t>(gray.rows);
+  msg.undistorted = undistorter_.active() && gray.size() == undistorter_.size();
+  if (camera_info_ && camera_info_->width == msg.image_width && camera_info_->height == msg.image_height) {
+    const Eigen::Matrix3d& k = undistorter_.cameraMatrix();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) msg.camera_matrix[3 * r + c] = msg.undistorted ? k(r, c) : camera_info_->K[3 * r + c];
+  }
+  motion_publisher_.publish(msg);
+
+  ++pairs_;
+  processing_ms_sum_ += estimate.elapsed_ms;
+  processing_ms_max_ = std::max(processing_ms_max_, estimate.elapsed_ms);
+  recent_failures_.push_back(estimate.failed);
+  if (int(recent_failures_.size()) > config_.quality_window) recent_failures_.pop_front();
+  if (estimate.failed) {
+    ++failures_;
+    ++failures_by_reason_[msg.failure];
+    last_problem_ = msg.failure + ": " + estimate.failure_detail;
+    ROS_WARN_THROTTLE(5.0, "registration failed (%s): %s", msg.failure.c_str(), estimate.failure_detail.c_str());
+  } else {
+    recent_inlier_fraction_.push_back(estimate.inlier_fraction);
+    if (int(recent_inlier_fraction_.size()) > config_.quality_window) recent_inlier_fraction_.pop_front();
+  }
+  last_motion_ = estimate;
+  previous_period_s_ = period_s;
+  previous_stamp_ = header.stamp;
+}
+
+void RegistrationRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  const double recent = recent_failures_.empty()
+                            ? 0.0
+                            : double(std::count(recent_failures_.begin(), recent_failures_.end(), true)) /
+                                  double(recent_failures_.size());
+  double inliers = 0.0;
+  for (double f : recent_inlier_fraction_) inliers += f;
+  if (!recent_inlier_fraction_.empty()) inliers /= double(recent_inlier_fraction_.size());
+  const double error_fraction = std::min(0.8, 4.0 * config_.warn_failure_fraction);
+  if (images_ == 0)
+    status.summary(DiagnosticStatus::WARN, "no image received yet on " + config_.image_topic);
+  else if (recent >= error_fraction)
+    status.summaryf(DiagnosticStatus::ERROR, "%.0f%% of the last %zu pairs failed", 100.0 * recent,
+                    recent_failures_.size());
+  else if (recent > config_.warn_failure_fraction)
+    status.summaryf(DiagnosticStatus::WARN, "%.0f%% of the last %zu pairs failed", 100.0 * recent,
+                    recent_failures_.size());
+  else
+    status.summary(DiagnosticStatus::OK, "registering");
+  status.add("method", reg::toString(config_.registration.method));
+  status.add("model", reg::toString(config_.registration.model));
+  status.add("undistorting", undistorter_.active() ? std::string("yes") : std::string("no"));
+  status.add("transport", active_transport_.empty() ? std::string("none yet") : active_transport_);
+  status.add("images received", images_);
+  status.add("images rejected", rejected_);
+  status.add("pairs registered", pairs_);
+  status.add("pairs failed", failures_);
+  status.add("sequence restarts", restarts_);
+  status.addf("recent failure fraction", "%.3f", recent);
+  status.addf("recent mean inlier fraction", "%.3f", inliers);
+  status.addf("mean processing ms", "%.2f", pairs_ ? processing_ms_sum_ / double(pairs_) : 0.0);
+  status.addf("max processing ms", "%.2f", processing_ms_max_);
+  for (const auto& [reason, count] : failures_by_reason_) status.add("failures: " + reason, count);
+  if (!last_problem_.empty()) status.add("last problem", last_problem_);
+}
+
+}  // namespace exocet_mosaic

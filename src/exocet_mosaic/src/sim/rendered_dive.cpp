@@ -1,0 +1,135 @@
+#include "exocet_mosaic/sim/rendered_dive.h"
+
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <opencv2/imgproc.hpp>
+
+
+#include "exocet_mosaic/sim/dive_synthesizer.h"
+
+namespace exocet_mosaic {
+namespace sim {
+
+RenderedDive renderDive(const DiveDescription& dive, int threads) {
+  DiveSynthesisConfig config = dive.synthesis;
+  config.threads = threads;
+  Seabed seabed = makeSeabed(dive.seabed, config.seed);
+  DiveSynthesizer synth(config, seabed.texture.get(), seabed.relief.get());
+  RenderedDive out;
+  out.camera = config.rig.camera;
+  DiveSink sink;
+  sink.frame = [&](const FrameTruth& truth) {
+    if (truth.dropped) return;
+    cv::Mat gray;
+    const cv::Mat& image = truth.frame.image;
+    if (image.channels() == 1 && image.depth() == CV_8U)
+      gray = image.clone();
+    else if (image.channels() == 3)
+      cv::cvtColor(image, gray, truth.frame.encoding == "rgb8" ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+    else
+      image.convertTo(gray, CV_8U, image.depth() == CV_16U ? 1.0 / 256.0 : 1.0);
+    const double t = truth.frame.stamp_s - config.start_time_unix_s;
+    out.gray.push_back(gray);
+    out.stamps_s.push_back(truth.frame.stamp_s);
+    out.local_from_camera.push_back(synth.cameraPoseLocal(t));
+    double turbidity = 1.0, gain = 1.0;
+    config.imaging.waterAt(t, &turbidity, &gain);
+    out.turbidity.push_back(turbidity);
+    out.light_gain.push_back(gain);
+  };
+  synth.run(sink);
+  return out;
+}
+
+namespace {
+
+constexpr uint64_t kCacheMagic = 0x31564944474552ULL;  // "REGDIV1"
+
+uint64_t fnv1a(const std::string& text) {
+  uint64_t h = 1469598103934665603ULL;
+  for (unsigned char c : text) h = (h ^ c) * 1099511628211ULL;
+  return h;
+}
+
+template <typename T>
+void put(std::ostream& out, const T& v) {
+  out.write(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+
+template <typename T>
+bool get(std::istream& in, T* v) {
+  return bool(in.read(reinterpret_cast<char*>(v), sizeof(T)));
+}
+
+bool readCache(const std::string& path, RenderedDive* dive) {
+  std::ifstream in(path, std::ios::binary);
+  uint64_t magic = 0, count = 0;
+  int32_t width = 0, height = 0;
+  if (!get(in, &magic) || magic != kCacheMagic || !get(in, &count) || !get(in, &width) || !get(in, &height))
+    return false;
+  for (uint64_t i = 0; i < count; ++i) {
+    double stamp, gain, turbidity, m[16];
+    if (!get(in, &stamp) || !get(in, &gain) || !get(in, &turbidity)) return false;
+    for (double& v : m)
+      if (!get(in, &v)) return false;
+    cv::Mat gray(height, width, CV_8UC1);
+    if (!in.read(reinterpret_cast<char*>(gray.data), std::streamsize(width) * height)) return false;
+    Eigen::Isometry3d pose;
+    pose.matrix() = Eigen::Map<const Eigen::Matrix4d>(m);
+    dive->gray.push_back(gray);
+    dive->stamps_s.push_back(stamp);
+    dive->light_gain.push_back(gain);
+    dive->turbidity.push_back(turbidity);
+    dive->local_from_camera.push_back(pose);
+  }
+  return true;
+}
+
+void writeCache(const std::string& path, const RenderedDive& dive) {
+  const std::string temporary = path + ".partial";
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    put(out, kCacheMagic);
+    put(out, uint64_t(dive.gray.size()));
+    put(out, int32_t(dive.camera.width));
+    put(out, int32_t(dive.camera.height));
+    for (size_t i = 0; i < dive.gray.size(); ++i) {
+      put(out, dive.stamps_s[i]);
+      put(out, dive.light_gain[i]);
+      put(out, dive.turbidity[i]);
+      const Eigen::Matrix4d m = dive.local_from_camera[i].matrix();
+      for (int k = 0; k < 16; ++k) put(out, m.data()[k]);
+      const cv::Mat g = dive.gray[i].isContinuous() ? dive.gray[i] : dive.gray[i].clone();
+      out.write(reinterpret_cast<const char*>(g.data), std::streamsize(g.total()));
+    }
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(temporary, ignored);
+      return;
+    }
+  }
+  std::error_code error;
+  std::filesystem::rename(temporary, path, error);
+}
+
+}  // namespace
+
+RenderedDive renderDiveCached(const DiveDescription& dive, int threads, const std::string& cache_dir) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "rendered_dive_%016llx.bin", static_cast<unsigned long long>(fnv1a(toYaml(dive))));
+  const std::string path = cache_dir + "/" + name;
+  RenderedDive cached;
+  cached.camera = dive.synthesis.rig.camera;
+  if (readCache(path, &cached) && !cached.gray.empty()) return cached;
+  RenderedDive rendered = renderDive(dive, threads);
+  std::error_code error;
+  std::filesystem::create_directories(cache_dir, error);
+  if (!error) writeCache(path, rendered);
+  return rendered;
+}
+
+}  // namespace sim
+}  // namespace exocet_mosaic
