@@ -30,6 +30,7 @@ test: build
 	@tools/run-tests.sh
 
 bench: build
+	@tools/make-bags.sh sample_out_and_back
 	@tools/run-bench.sh
 
 format:

@@ -8,7 +8,10 @@ replay's last image, then checks: one message per consecutive image pair, stamps
 corner-transfer errors, and the node's peak resident memory.
 """
 import math
+import atexit
 import os
+import signal
+import subprocess
 import time
 import unittest
 import xmlrpc.client
@@ -84,6 +87,12 @@ class RegistrationReplayTest(unittest.TestCase):
         stamps, truth, k, (width, height) = read_truth(bag)
         motions = []
         rospy.Subscriber('/mosaic/motion', ImageMotion, motions.append, queue_size=1000)
+        time.sleep(1.0)
+        player = subprocess.Popen(['rosbag', 'play', '--clock', '-q', '-r', str(rospy.get_param('~rate')),
+                                   '--queue=1000', '--wait-for-subscribers', bag, '--topics',
+                                   '/camera/image_raw/compressed', '/camera/camera_info'], start_new_session=True)
+        # Never leave a player behind: it would reconnect to the next test's master (same port) and replay there.
+        atexit.register(lambda: player.poll() is None and os.killpg(player.pid, signal.SIGKILL))
         # Wall-clock wait: until the last pair's motion is in, or nothing new has come for 20 s.
         last_count, last_change = -1, time.time()
         while time.time() - last_change < 20.0:

@@ -215,6 +215,7 @@ int main(int argc, char** argv) {
     }
   }
   cv::setNumThreads(1);
+  std::cout << std::unitbuf;  // progress lines appear as they happen, also when redirected to a file
   Json json;
   json.merge(out_dir + "/registration.json");
 

@@ -159,9 +159,9 @@ class RegistrationNodeTest(unittest.TestCase):
                     if status.name.endswith('registration'):
                         values = {kv.key: kv.value for kv in status.values}
                         break
-                if values.get('images rejected') == '2':
+                if values.get('pairs failed') == '1':
                     break
-            if values.get('images rejected') == '2':
+            if values.get('pairs failed') == '1':
                 break
             time.sleep(0.2)
         self.assertEqual(values.get('images rejected'), '2', values)

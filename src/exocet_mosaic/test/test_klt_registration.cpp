@@ -188,6 +188,27 @@ TEST(RobustMotionFitter, ReportsTooFewInliersAndBadInput) {
   EXPECT_FALSE(degenerate.ok);
 }
 
+// The local scale tells a model error that varies smoothly over the image (the seabed's relief, lens distortion)
+// from points that move independently of their neighbours (particles at various depths).
+TEST(RobustMotionFitter, LocalScaleSeparatesSmoothModelErrorFromIndependentMotion) {
+  RobustFitConfig config;
+  config.rejection_k = 20.0;  // keep every point: this is about the residuals, not the rejection
+  const RobustMotionFitter fitter(config);
+  // A similarity fitted to a perspective motion: residuals of about a pixel, smooth over the image.
+  const Correspondences smooth = makeCorrespondences(
+      homographyAboutCentre(0.02, 1.0, 4.0, 2.0, 0.0, 2e-5, 0.0, kWidth, kHeight), 150, 0.05, 0.0, 41);
+  const RobustFit a = fitter.fit(smooth.from, smooth.to, centreOf(kWidth, kHeight));
+  // Each point displaced on its own by 0.7 px (1 sigma per coordinate).
+  const Correspondences independent = makeCorrespondences(truthFor(MotionModel::kSimilarity), 150, 0.7, 0.0, 42);
+  const RobustFit b = fitter.fit(independent.from, independent.to, centreOf(kWidth, kHeight));
+  std::printf("[ info ] smooth model error: residual %.3f px, local %.3f px; independent: residual %.3f, local %.3f\n",
+              a.residual_scale_px, a.local_scale_px, b.residual_scale_px, b.local_scale_px);
+  EXPECT_GT(a.residual_scale_px, 0.3);
+  EXPECT_LT(a.local_scale_px, 0.3 * a.residual_scale_px);
+  EXPECT_NEAR(b.residual_scale_px, 0.7, 0.1);
+  EXPECT_NEAR(b.local_scale_px, 0.7, 0.2);
+}
+
 TEST(RobustMotionFitter, ConfigValidationNamesTheField) {
   RobustFitConfig config;
   EXPECT_EQ(config.validate(), "");
@@ -572,48 +593,47 @@ TEST(KltRegistrar, DerivativesOnDemandMatchWholeLevels) {
   EXPECT_EQ(lazy.registerPair(pair.a, pair.b).parameters, whole.registerPair(pair.a, pair.b).parameters);
 }
 
-// Prints the steady-state frame rate of registerNext on one thread (no assertion on time).
-void speedCheck(const char* name, int width, int height, int picture_px, MotionModel model) {
+// Prints the steady-state frame rate of registerNext on one thread (no assertion on time): a straight run at
+// 8 px per frame, so that features leave the image and detection runs now and then, as on a survey line.
+void speedCheck(const char* name, int width, int height, int count, MotionModel model) {
   cv::setNumThreads(1);
-  const int count = 30;
-  const Sequence s =
-      makeSequence(seabedPicture(picture_px, 3), width, height, count, 6.0, 1.5, model == MotionModel::kHomography, 12);
+  const double speed_px = 8.0;
+  const int picture_px = static_cast<int>(std::max(width, height) * 1.3 + speed_px * count);
+  const Sequence s = makeSequence(seabedPicture(picture_px, 3), width, height, count, speed_px, 1.5,
+                                  model == MotionModel::kHomography, 12);
   KltRegistrar registrar(configFor(model));
-  // Ping-pong over the frames (forwards then backwards) for a long steady run.
-  std::vector<int> order;
-  for (int pass = 0; pass < 8; ++pass)
-    for (int k = 0; k < count; ++k) order.push_back(pass % 2 == 0 ? k : count - 1 - k);
   Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
-  int failures = 0;
+  int failures = 0, detections = 0;
   double pyramid = 0, track = 0, fit = 0, detect = 0;
-  const int warmup = 5;
+  const int warmup = 3;
   std::chrono::steady_clock::time_point start;
-  for (size_t i = 0; i < order.size(); ++i) {
-    if (static_cast<int>(i) == warmup) start = std::chrono::steady_clock::now();
-    const MotionEstimate e = registrar.registerNext(s.frames[order[i]], prediction);
+  for (int i = 0; i < count; ++i) {
+    if (i == warmup) start = std::chrono::steady_clock::now();
+    const MotionEstimate e = registrar.registerNext(s.frames[i], prediction);
     prediction = e.failed ? Eigen::Matrix3d::Identity() : e.pixel_matrix;
-    if (static_cast<int>(i) >= warmup) {
+    if (i >= warmup) {
       failures += e.failed;
       const KltDiagnostics& d = registrar.lastDiagnostics();
       pyramid += d.pyramid_ms, track += d.track_ms, fit += d.fit_ms, detect += d.detect_ms;
+      detections += d.detected > 0;
     }
   }
-  const int timed = static_cast<int>(order.size()) - warmup;
+  const int timed = count - warmup;
   const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
-      "[ info ] speed %s %dx%d %s, 1 thread: %.0f frames/s (%.3f ms/frame: pyramid %.3f, track %.3f, "
-      "fit %.3f, detect %.3f); %d failures in %d\n",
+      "[ info ] speed %s %dx%d %s, 1 thread: %.0f frames/s (%.3f ms/frame: pyramid %.3f, track %.3f, fit %.3f, "
+      "detect %.3f amortised over %d detections); %d failures in %d\n",
       name, width, height, toString(model).c_str(), timed / elapsed_s, 1e3 * elapsed_s / timed, pyramid / timed,
-      track / timed, fit / timed, detect / timed, failures, timed);
-  EXPECT_LE(failures, 1);  // the turn of the ping-pong may be one
+      track / timed, fit / timed, detect / timed, detections, failures, timed);
+  EXPECT_EQ(failures, 0);
 }
 
 TEST(KltRegistrar, SpeedPal) {
-  speedCheck("PAL", 720, 576, 1100, MotionModel::kSimilarity);
-  speedCheck("PAL", 720, 576, 1100, MotionModel::kHomography);
+  speedCheck("PAL", 720, 576, 150, MotionModel::kSimilarity);
+  speedCheck("PAL", 720, 576, 150, MotionModel::kHomography);
 }
 
-TEST(KltRegistrar, SpeedHd) { speedCheck("HD", 1920, 1080, 2300, MotionModel::kSimilarity); }
+TEST(KltRegistrar, SpeedHd) { speedCheck("HD", 1920, 1080, 60, MotionModel::kSimilarity); }
 
 }  // namespace
 }  // namespace registration

@@ -31,33 +31,65 @@ IlluminationNormalizer::IlluminationNormalizer(const IlluminationNormalizerConfi
 
 cv::Mat IlluminationNormalizer::apply(const cv::Mat& gray) const {
   if (!config_.enabled || gray.empty()) return gray;
-  // Mean and mean of squares at the coarse level, each Gaussian-smoothed; sigma from their difference.
-  cv::Mat f;
-  gray.convertTo(f, CV_32F);
-  cv::Mat coarse = f, coarse_sq = f.mul(f);
-  for (int l = 0; l < config_.level; ++l) {
-    cv::pyrDown(coarse, coarse);
-    cv::pyrDown(coarse_sq, coarse_sq);
-  }
-  cv::GaussianBlur(coarse, coarse, cv::Size(), config_.sigma_level_px, 0.0, cv::BORDER_REFLECT);
+  // The fields are smooth, so everything but the last pass runs on reduced images: the mean from the 8-bit
+  // pyramid, the mean of squares from the half-resolution level (the finest texture's share of the variance is
+  // lost alike everywhere, which only rescales the output).
+  cv::Mat half, coarse8;
+  cv::pyrDown(gray, half);
+  coarse8 = half;
+  for (int l = 1; l < config_.level; ++l) cv::pyrDown(coarse8, coarse8);
+  cv::Mat half_f, coarse_sq, mean;
+  half.convertTo(half_f, CV_32F);
+  coarse_sq = half_f.mul(half_f);
+  for (int l = 1; l < config_.level; ++l) cv::pyrDown(coarse_sq, coarse_sq);
+  coarse8.convertTo(mean, CV_32F);
+  cv::GaussianBlur(mean, mean, cv::Size(), config_.sigma_level_px, 0.0, cv::BORDER_REFLECT);
   cv::GaussianBlur(coarse_sq, coarse_sq, cv::Size(), config_.sigma_level_px, 0.0, cv::BORDER_REFLECT);
-  cv::Mat inv_sigma(coarse.size(), CV_32F);
+  cv::Mat inv_sigma(mean.size(), CV_32F);
   const float floor_sq = float(config_.min_contrast_grey * config_.min_contrast_grey);
-  for (int r = 0; r < coarse.rows; ++r) {
-    const float* m = coarse.ptr<float>(r);
-    const float* s = coarse_sq.ptr<float>(r);
+  for (int r = 0; r < mean.rows; ++r) {
+    const float* m = mean.ptr<float>(r);
+    const float* q = coarse_sq.ptr<float>(r);
     float* o = inv_sigma.ptr<float>(r);
-    for (int c = 0; c < coarse.cols; ++c) o[c] = float(config_.output_gain) / std::sqrt(std::max(s[c] - m[c] * m[c], floor_sq));
+    for (int c = 0; c < mean.cols; ++c)
+      o[c] = float(config_.output_gain) / std::sqrt(std::max(q[c] - m[c] * m[c], floor_sq));
   }
-  cv::Mat fields[2] = {coarse, inv_sigma}, merged, full;
-  cv::merge(fields, 2, merged);
-  cv::resize(merged, full, gray.size(), 0.0, 0.0, cv::INTER_LINEAR);
+
+  // Bilinear interpolation of the two coarse fields back to full resolution, fused with the normalisation: per row
+  // the two coarse rows are blended once, then each pixel blends two columns.
+  const int cw = mean.cols, ch = mean.rows;
+  const float scale_x = float(cw) / float(gray.cols), scale_y = float(ch) / float(gray.rows);
+  std::vector<int> x0(gray.cols);
+  std::vector<float> wx(gray.cols);
+  for (int x = 0; x < gray.cols; ++x) {
+    const float cx = std::min(std::max((x + 0.5f) * scale_x - 0.5f, 0.0f), float(cw - 1));
+    x0[x] = std::min(int(cx), std::max(cw - 2, 0));
+    wx[x] = cw > 1 ? cx - float(x0[x]) : 0.0f;
+  }
+  std::vector<float> row_mean(cw + 1), row_gain(cw + 1);
   cv::Mat out(gray.size(), CV_8UC1);
-  for (int r = 0; r < gray.rows; ++r) {
-    const float* in = f.ptr<float>(r);
-    const cv::Vec2f* mi = full.ptr<cv::Vec2f>(r);
-    uint8_t* o = out.ptr<uint8_t>(r);
-    for (int c = 0; c < gray.cols; ++c) o[c] = cv::saturate_cast<uint8_t>(128.0f + (in[c] - mi[c][0]) * mi[c][1]);
+  for (int y = 0; y < gray.rows; ++y) {
+    const float cy = std::min(std::max((y + 0.5f) * scale_y - 0.5f, 0.0f), float(ch - 1));
+    const int y0 = std::min(int(cy), std::max(ch - 2, 0));
+    const int y1 = std::min(y0 + 1, ch - 1);
+    const float wy = ch > 1 ? cy - float(y0) : 0.0f;
+    const float *m0 = mean.ptr<float>(y0), *m1 = mean.ptr<float>(y1);
+    const float *g0 = inv_sigma.ptr<float>(y0), *g1 = inv_sigma.ptr<float>(y1);
+    for (int c = 0; c < cw; ++c) {
+      row_mean[c] = m0[c] + wy * (m1[c] - m0[c]);
+      row_gain[c] = g0[c] + wy * (g1[c] - g0[c]);
+    }
+    row_mean[cw] = row_mean[cw - 1];
+    row_gain[cw] = row_gain[cw - 1];
+    const uint8_t* in = gray.ptr<uint8_t>(y);
+    uint8_t* o = out.ptr<uint8_t>(y);
+    for (int x = 0; x < gray.cols; ++x) {
+      const int i = x0[x];
+      const float w = wx[x];
+      const float mu = row_mean[i] + w * (row_mean[i + 1] - row_mean[i]);
+      const float gain = row_gain[i] + w * (row_gain[i + 1] - row_gain[i]);
+      o[x] = cv::saturate_cast<uint8_t>(128.0f + (float(in[x]) - mu) * gain);
+    }
   }
   return out;
 }

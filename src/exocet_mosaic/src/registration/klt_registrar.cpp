@@ -98,9 +98,12 @@ std::string KltConfig::validate() const {
   check(min_tracks >= minimal && min_tracks <= 5000, "min_tracks", minimal_range);
   check(min_inliers >= minimal && min_inliers <= 5000, "min_inliers", minimal_range);
   check(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0, "min_inlier_fraction", "[0, 1]");
+  check(consensus_threshold_px > 0.0 && consensus_threshold_px <= 100.0, "consensus_threshold_px", "(0, 100]");
   check(rejection_k >= 2.0 && rejection_k <= 20.0, "rejection_k", "[2, 20]");
   check(min_residual_scale_px > 0.0 && min_residual_scale_px <= 10.0, "min_residual_scale_px", "(0, 10]");
   check(max_residual_px > 0.0 && max_residual_px <= 100.0, "max_residual_px", "(0, 100]");
+  check(max_local_residual_px > 0.0 && max_local_residual_px <= 100.0, "max_local_residual_px", "(0, 100]");
+  check(covariance_inflation >= 1.0 && covariance_inflation <= 100.0, "covariance_inflation", "[1, 100]");
   check(max_motion_fraction > 0.0 && max_motion_fraction <= 10.0, "max_motion_fraction", "(0, 10]");
   check(min_mean_grey >= 0.0 && min_mean_grey <= 255.0, "min_mean_grey", "[0, 255]");
   check(min_contrast_grey >= 0.0 && min_contrast_grey <= 128.0, "min_contrast_grey", "[0, 128]");
@@ -114,6 +117,7 @@ RobustFitConfig KltConfig::fitConfig() const {
   fit.min_scale_px = min_residual_scale_px;
   fit.min_inliers = min_inliers;
   fit.min_inlier_fraction = min_inlier_fraction;
+  fit.sample_threshold_px = consensus_threshold_px;
   return fit;
 }
 
@@ -430,8 +434,9 @@ void KltRegistrar::estimate(const Frame& previous, Frame* current, const Eigen::
     initial = parametersFromPixelMatrix(config_.model, prediction_px, centre, width, height);
   const RobustFit fit = fitter_.fit(from_, to_, centre, initial);
   diagnostics_.fit_ms += msSince(start);
+  diagnostics_.local_residual_px = fit.local_scale_px;
   result->parameters = fit.parameters;
-  result->covariance = fit.covariance;
+  result->covariance = config_.covariance_inflation * fit.covariance;
   result->pixel_matrix = pixelMatrix(config_.model, fit.parameters, centre);
   result->inliers = fit.inliers;
   result->inlier_fraction = fit.inlier_fraction;
@@ -453,6 +458,11 @@ void KltRegistrar::estimate(const Frame& previous, Frame* current, const Eigen::
     return fail(FailureReason::kInconsistent, "inlier residual scale " + std::to_string(fit.residual_scale_px) +
                                                   " px (max_residual_px " + std::to_string(config_.max_residual_px) +
                                                   ")");
+  if (!(fit.local_scale_px <= config_.max_local_residual_px))
+    return fail(FailureReason::kInconsistent, "neighbouring inliers disagree by " + std::to_string(fit.local_scale_px) +
+                                                  " px (max_local_residual_px " +
+                                                  std::to_string(config_.max_local_residual_px) +
+                                                  "): the tracks do not move with one surface (particles?)");
   result->failed = false;
   result->failure = FailureReason::kNone;
   result->failure_detail.clear();

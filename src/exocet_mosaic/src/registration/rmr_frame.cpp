@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <opencv2/imgproc.hpp>
 
@@ -13,12 +14,8 @@ namespace {
 
 // Pixels this close to a level's edge are never selected: their central differences need both neighbours.
 constexpr int kBorder = 2;
-// Pixels sampled (regular grid) to find the gradient threshold that keeps the wanted number of pixels.
-constexpr double kSamplePixels = 5000.0;
-// Largest number of candidate pixels of a level (beyond, they are taken on a coarser grid).
-constexpr double kMaxCandidatePixels = 600000.0;
-// The full pass keeps up to this many times the wanted count before trimming to it exactly.
-constexpr double kTrimAbove = 1.25;
+// Candidates (one per cell) per pixel wanted: the cell size follows from it.
+constexpr double kCandidatesPerPixel = 2.5;
 
 // Steepest-descent vector grad(I) . dW/dp at the identity, for the parameterisation of motion_model.h, written to
 // out[0], out[stride], out[2 * stride]...
@@ -56,10 +53,10 @@ RmrFrame::RmrFrame(const cv::Mat& gray, int levels, const RmrSelectionParameters
   if (recycled) {
     levels_ = std::move(recycled->levels_);
     selections_ = std::move(recycled->selections_);
-    magnitude_ = std::move(recycled->magnitude_);
-    sample_ = std::move(recycled->sample_);
+    magnitude_scratch_ = std::move(recycled->magnitude_scratch_);
     candidate_magnitude_ = std::move(recycled->candidate_magnitude_);
     candidate_index_ = std::move(recycled->candidate_index_);
+    candidate_cell_ = std::move(recycled->candidate_cell_);
     for (int i = 0; i < 2; ++i) {
       row_index_[i] = std::move(recycled->row_index_[i]);
       row_of_[i] = std::move(recycled->row_of_[i]);
@@ -107,95 +104,82 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
   if (w <= 2 * kBorder || h <= 2 * kBorder) return sel;
   const float min_gradient = static_cast<float>(parameters_.min_gradient);
   const int inner_w = w - 2 * kBorder;
-  std::vector<float>& magnitude = magnitude_;
-  magnitude.assign((inner_w + 7) / 8 * 8, 0.0f);  // padded with zeros for the groups of 8 of pass 2
-  // |gx| + |gy| (central differences) of the interior pixels of row r, in `magnitude`.
-  const auto rowMagnitude = [&](int r) {
-    const float* up = image.ptr<float>(r - 1) + kBorder;
-    const float* row = image.ptr<float>(r) + kBorder;
-    const float* down = image.ptr<float>(r + 1) + kBorder;
-    float* m = magnitude.data();
-    for (int c = 0; c < inner_w; ++c) m[c] = 0.5f * (std::abs(row[c + 1] - row[c - 1]) + std::abs(down[c] - up[c]));
-  };
-
-  // Candidates: every pixel, or on large levels (HD) one pixel in grid x grid, which bounds the cost of the full pass
-  // (the strongest gradients of a quarter of the pixels are still many more than the pixels kept).
-  const double interior = double(inner_w) * (h - 2 * kBorder);
-  const int grid = std::max(1, static_cast<int>(std::ceil(std::sqrt(interior / kMaxCandidatePixels))));
-  const double population = interior / (grid * grid);
-
-  // Pass 1, on a regular sample of the candidates: the magnitude threshold that keeps about the wanted number.
-  const int sample_step = grid * std::max(1, static_cast<int>(std::sqrt(population / kSamplePixels)));
-  std::vector<float>& sample = sample_;
-  sample.resize(static_cast<size_t>((h / sample_step + 1) * (w / sample_step + 1)));
-  size_t kept = 0;
-  long sampled = 0;
-  for (int r = kBorder; r < h - kBorder; r += sample_step) {
-    const float* up = image.ptr<float>(r - 1);
-    const float* row = image.ptr<float>(r);
-    const float* down = image.ptr<float>(r + 1);
-    for (int c = kBorder; c < w - kBorder; c += sample_step) {
-      ++sampled;
-      const float m = 0.5f * (std::abs(row[c + 1] - row[c - 1]) + std::abs(down[c] - up[c]));
-      sample[kept] = m;
-      kept += m >= min_gradient;
-    }
-  }
-  sample.resize(kept);
-  const double sample_share = sampled > 0 ? double(sample.size()) / sampled : 0.0;
-  // Exact on small levels (sample_step = 1), within a few % on the others: it only decides kTooLittleTexture.
-  sel.textured = static_cast<int>(std::lround(sample_share * interior));
-  const long max_pixels = std::max<long>(parameters_.min_pixels, std::lround(parameters_.max_pixels *
-                                                                             std::ldexp(1.0, 2 * (parameters_.finest_level - level))));
+  // Candidates: the strongest gradient of each cell of cell x cell pixels, a few per pixel wanted. The pixels kept then
+  // spread over the image, and a small bright blob (marine snow, a particle) yields a few candidates rather than its
+  // whole rim of strong gradients, so that such outliers stay the minority that the robust estimation needs.
+  const int inner_h = h - 2 * kBorder;
+  const double interior = double(inner_w) * inner_h;
+  const long max_pixels =
+      std::max<long>(parameters_.min_pixels,
+                     std::lround(parameters_.max_pixels * std::ldexp(1.0, 2 * (parameters_.finest_level - level))));
   long target = std::lround(parameters_.pixel_fraction * interior);
-  target = std::max<long>(target, parameters_.min_pixels);
-  target = std::min<long>({target, max_pixels, std::lround(sample_share * population)});
-  float threshold = min_gradient;
-  if (target <= 0 || sample.empty()) return sel;
-  // The sample's quantile: the full pass then finds the target give or take the sampling error (a few %), trimmed
-  // below when it finds many more.
-  const size_t keep_in_sample = std::min(sample.size(), static_cast<size_t>(std::ceil(target * sample.size() /
-                                                                                        (sample_share * population))));
-  if (keep_in_sample < sample.size()) {
-    auto nth = sample.end() - static_cast<long>(keep_in_sample);
-    std::nth_element(sample.begin(), nth, sample.end());
-    threshold = std::max(min_gradient, *nth);
-  }
-
-  // Pass 2, every candidate: those at or above the threshold.
+  target = std::min<long>(std::max<long>(target, parameters_.min_pixels), max_pixels);
+  const int cell = std::max(1, static_cast<int>(std::sqrt(interior / (kCandidatesPerPixel * target))));
+  const int cells_x = (inner_w + cell - 1) / cell;
+  std::vector<float>& band_max = band_max_;  // per column, the largest magnitude of the band's rows
+  std::vector<int>& band_row = band_row_;    // ... and its row
+  band_max.resize(inner_w);
+  band_row.resize(inner_w);
   std::vector<int>& candidate_index = candidate_index_;  // (r << 16) + c
+  std::vector<int>& candidate_cell = candidate_cell_;    // (cell row << 16) + cell column
   std::vector<float>& candidate_magnitude = candidate_magnitude_;
   size_t candidates = 0;
-  // The magnitudes of a row are padded with zeros to a multiple of 8, so that groups of 8 without a candidate are
-  // skipped after one vectorised maximum (most are: a few % of the pixels qualify, and they cluster on edges).
-  const int padded_w = static_cast<int>(magnitude.size());
-  for (int r = kBorder; r < h - kBorder; r += grid) {
-    rowMagnitude(r);
-    if (candidate_index.size() < candidates + inner_w) {
-      candidate_index.resize(2 * (candidates + inner_w));
-      candidate_magnitude.resize(2 * (candidates + inner_w));
-    }
-    const float* m = magnitude.data();
-    const int base = (r << 16) + kBorder;
-    for (int c0 = 0; c0 < padded_w; c0 += 8) {
-      float group_max = m[c0];
-      for (int l = 1; l < 8; ++l) group_max = std::max(group_max, m[c0 + l]);
-      if (group_max < threshold) continue;
-      for (int c = c0; c < c0 + 8; ++c) {
-        if (m[c] < threshold || c % grid != 0) continue;
-        candidate_index[candidates] = base + c;
-        candidate_magnitude[candidates] = m[c];
-        ++candidates;
+  long textured = 0;
+  int cell_row = 0;
+  for (int r0 = kBorder; r0 < h - kBorder; r0 += cell, ++cell_row) {
+    // Column maxima over the band's rows (branch-free, vectorised), then the maximum of each cell among them.
+    const int r1 = std::min(r0 + cell, h - kBorder);
+    float* bm = band_max.data();
+    int* br = band_row.data();
+    for (int r = r0; r < r1; ++r) {
+      const float* up = image.ptr<float>(r - 1) + kBorder;
+      const float* row = image.ptr<float>(r) + kBorder;
+      const float* down = image.ptr<float>(r + 1) + kBorder;
+      if (r == r0) {
+        for (int c = 0; c < inner_w; ++c) {
+          bm[c] = 0.5f * (std::abs(row[c + 1] - row[c - 1]) + std::abs(down[c] - up[c]));
+          br[c] = r;
+        }
+        // Textured pixels counted on the band's first row (an estimate when cell > 1: it only decides
+        // kTooLittleTexture).
+        int row_textured = 0;
+        for (int c = 0; c < inner_w; ++c) row_textured += bm[c] >= min_gradient;
+        textured += static_cast<long>(row_textured) * (r1 - r0);
+        continue;
+      }
+      for (int c = 0; c < inner_w; ++c) {
+        const float m = 0.5f * (std::abs(row[c + 1] - row[c - 1]) + std::abs(down[c] - up[c]));
+        const int larger = m > bm[c];  // arithmetic rather than selects, which GCC vectorises
+        br[c] += (r - br[c]) * larger;
+        bm[c] = std::max(bm[c], m);
       }
     }
+    if (candidate_index.size() < candidates + cells_x) {
+      candidate_index.resize(2 * (candidates + cells_x));
+      candidate_cell.resize(2 * (candidates + cells_x));
+      candidate_magnitude.resize(2 * (candidates + cells_x));
+    }
+    for (int cx = 0, c0 = 0; cx < cells_x; ++cx, c0 += cell) {
+      const int c1 = std::min(c0 + cell, inner_w);
+      int best = c0;
+      for (int c = c0 + 1; c < c1; ++c)
+        if (bm[c] > bm[best]) best = c;
+      if (bm[best] < min_gradient) continue;
+      candidate_index[candidates] = (br[best] << 16) + best + kBorder;
+      candidate_cell[candidates] = (cell_row << 16) + cx;
+      candidate_magnitude[candidates] = bm[best];
+      ++candidates;
+    }
   }
+  sel.textured = static_cast<int>(textured);
+  if (candidates == 0) return sel;
 
-  // Too many (ties at the threshold, sampling error): exactly `target`, all the candidates above the boundary
-  // magnitude and an even share (in raster order) of those equal to it.
+  // The `target` strongest candidates: all those above the boundary magnitude and an even share (in raster order) of
+  // those equal to it.
   float boundary = -1.0f;
   long boundary_keep = 0, boundary_count = 0;
-  if (static_cast<double>(candidates) > kTrimAbove * target) {
-    std::vector<float>& m = sample_;  // the sample is no longer needed
+  if (static_cast<long>(candidates) > target) {
+    std::vector<float>& m = magnitude_scratch_;
     m.assign(candidate_magnitude.begin(), candidate_magnitude.begin() + candidates);
     auto nth = m.end() - target;
     std::nth_element(m.begin(), nth, m.end());
@@ -214,12 +198,13 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
   sel.value.resize(reserve);
   sel.steepest.resize(reserve * ng);  // one array per parameter, `reserve` apart until compacted below
   sel.next.resize(reserve);
-  // Index of the selected pixel at each column of the two latest rows, with the row it belongs to (no clearing).
+  // Index of the selected pixel at each cell column of the two latest cell rows, with the cell row it belongs to (no
+  // clearing; one column of margin on each side): neighbours are pixels of neighbouring cells.
   std::vector<int>* row_index = row_index_;
   std::vector<int>* row_of = row_of_;
   for (int i = 0; i < 2; ++i) {
-    row_index[i].assign(w, -1);
-    row_of[i].assign(w, -1);
+    row_index[i].assign(cells_x + 2, -1);
+    row_of[i].assign(cells_x + 2, std::numeric_limits<int>::min());  // no cell row (cy - 1 >= -1)
   }
   const Eigen::Vector2d centre_px = centre(level);
   long boundary_seen = 0;
@@ -242,16 +227,17 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
     steepestDescent(parameters_.model, gx, gy, static_cast<float>(col - centre_px.x()),
                     static_cast<float>(r - centre_px.y()), &sel.steepest[k], reserve);
     sel.next[k] = {-1, -1, -1, -1};
-    std::vector<int>& cur_index = row_index[r & 1];
-    std::vector<int>& cur_row = row_of[r & 1];
-    const std::vector<int>& prev_index = row_index[(r - 1) & 1];
-    const std::vector<int>& prev_row = row_of[(r - 1) & 1];
-    if (k > 0 && sel.y[k - 1] == r && sel.x[k - 1] == col - 1) sel.next[k - 1][0] = k;
-    if (prev_row[col + 1] == r - 1) sel.next[prev_index[col + 1]][1] = k;
-    if (prev_row[col] == r - 1) sel.next[prev_index[col]][2] = k;
-    if (prev_row[col - 1] == r - 1) sel.next[prev_index[col - 1]][3] = k;
-    cur_index[col] = k;
-    cur_row[col] = r;
+    const int cy = candidate_cell[i] >> 16, cx = (candidate_cell[i] & 0xffff) + 1;
+    std::vector<int>& cur_index = row_index[cy & 1];
+    std::vector<int>& cur_row = row_of[cy & 1];
+    const std::vector<int>& prev_index = row_index[(cy - 1) & 1];
+    const std::vector<int>& prev_row = row_of[(cy - 1) & 1];
+    if (cur_row[cx - 1] == cy) sel.next[cur_index[cx - 1]][0] = k;
+    if (prev_row[cx + 1] == cy - 1) sel.next[prev_index[cx + 1]][1] = k;
+    if (prev_row[cx] == cy - 1) sel.next[prev_index[cx]][2] = k;
+    if (prev_row[cx - 1] == cy - 1) sel.next[prev_index[cx - 1]][3] = k;
+    cur_index[cx] = k;
+    cur_row[cx] = cy;
   }
   // One array per parameter, contiguous, so that the normal equations are dot products over contiguous arrays.
   for (int j = 1; j < ng && static_cast<size_t>(sel.count) < reserve; ++j)

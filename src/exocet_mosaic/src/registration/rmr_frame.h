@@ -23,7 +23,7 @@ namespace internal {
 struct RmrSelectionParameters {
   MotionModel model = MotionModel::kAffine;
   double min_gradient = 2.0;     ///< |gx| + |gy| (grey levels per pixel) below which a pixel is never used
-  double pixel_fraction = 0.15;  ///< share of the level's pixels kept, strongest gradients first
+  double pixel_fraction = 0.15;  ///< share of the level's pixels kept, strongest cell maxima first
   int min_pixels = 2000;         ///< ... but at least this many (when textured enough)
   int max_pixels = 20000;        ///< ... and at most this many at `finest_level`, a quarter as many a level coarser...
   int finest_level = 0;          ///< level of the final estimate (where max_pixels applies)
@@ -31,7 +31,8 @@ struct RmrSelectionParameters {
 };
 
 /**
- * @brief The selected pixels of one reference level, in raster order (structure of arrays).
+ * @brief The selected pixels of one reference level (at most one per selection cell, in the raster order of the
+ * cells; structure of arrays).
  *
  * For each pixel: its level coordinates, its grey level, and its steepest-descent vector grad(I) . dW/dp at the
  * identity (model parameters in coordinates centred on the level's image of the level-0 centre), which the inverse
@@ -39,13 +40,13 @@ struct RmrSelectionParameters {
  */
 struct RmrLevelSelection {
   int count = 0;                   ///< selected pixels
-  int textured = 0;                ///< pixels of the level with |gx| + |gy| >= min_gradient (before the cap;
-                                   ///< estimated from a regular sample on large levels)
+  int textured = 0;                ///< pixels of the level with |gx| + |gy| >= min_gradient (estimated on one row
+                                   ///< in each band of selection cells)
   int geometric_parameters = 0;    ///< size of each steepest-descent vector
   std::vector<float> x, y, value;  ///< count each
   std::vector<float> steepest;     ///< geometric_parameters arrays of count: [j * count + i] for pixel i
-  /// Indices of the selected 8-neighbours after each pixel in raster order (right, down-left, down, down-right), -1
-  /// when not selected: each neighbouring pair once, to measure the residuals' spatial correlation.
+  /// Indices of the selected pixels of the neighbouring cells after each pixel's (right, down-left, down, down-right;
+  /// -1: none): each neighbouring pair once, to measure the residuals' spatial correlation.
   std::vector<std::array<int, 4>> next;
 };
 
@@ -80,8 +81,9 @@ class RmrFrame {
   std::vector<RmrLevelSelection> selections_;
   std::vector<bool> selected_;  ///< selections_[level] is built
   // Scratch of the selection, kept for reuse.
-  std::vector<float> magnitude_, sample_, candidate_magnitude_;
-  std::vector<int> candidate_index_;
+  std::vector<float> magnitude_scratch_, candidate_magnitude_;
+  std::vector<int> candidate_index_, candidate_cell_, band_row_;
+  std::vector<float> band_max_;
   std::vector<int> row_index_[2], row_of_[2];
   RmrSelectionParameters parameters_;
   double mean_ = 0.0;

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <string>
 
 #include <Eigen/Dense>
 
@@ -14,7 +16,7 @@ namespace {
 constexpr double kMadToSigma = 1.4826;  // MAD of a Gaussian = 0.6745 sigma
 constexpr int kMaxParameters = 10;      // 8 geometric + gain + offset
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kMedianSample = 4096;     // residuals used for the robust scale
+constexpr int kMedianSample = 4096;       // residuals used for the robust scale
 constexpr int kCorrelationSample = 2000;  // pixels used to measure the residuals' spatial correlation
 
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxParameters, kMaxParameters>;
@@ -97,11 +99,12 @@ const float* column(const RmrLevelSelection& sel, int j) {
   return nullptr;
 }
 
-// Tukey weights and the normal equations sum w s s^T, sum w s e, with s = (steepest descent, A, 1) (nt of them).
-// `weighted` and `scratch` are work arrays of sel.count.
-void accumulate(const RmrLevelSelection& sel, int nt, const float* residuals, double cutoff, float* weights,
-                float* weighted, float* scratch, SmallMatrix* h, SmallVector* b) {
+// Tukey weights and the normal equations sum w s s^T, sum w s e, with s = the Jacobian columns `columns` (nullptr: a
+// column of ones). `weighted` and `scratch` are work arrays of sel.count.
+void accumulate(const RmrLevelSelection& sel, const std::vector<const float*>& columns, const float* residuals,
+                double cutoff, float* weights, float* weighted, float* scratch, SmallMatrix* h, SmallVector* b) {
   const int n = sel.count;
+  const int nt = static_cast<int>(columns.size());
   const float inv_cutoff = static_cast<float>(1.0 / cutoff);
   for (int i = 0; i < n; ++i) {
     const float e = residuals[i];
@@ -115,14 +118,14 @@ void accumulate(const RmrLevelSelection& sel, int nt, const float* residuals, do
   h->resize(nt, nt);
   b->resize(nt);
   for (int j = 0; j < nt; ++j) {
-    const float* cj = column(sel, j);
+    const float* cj = columns[j];
     (*b)[j] = dot(weighted, cj, n);
     if (cj) {
       for (int i = 0; i < n; ++i) scratch[i] = weights[i] * cj[i];
     } else {
       std::copy(weights, weights + n, scratch);
     }
-    for (int k = j; k < nt; ++k) (*h)(j, k) = (*h)(k, j) = dot(scratch, column(sel, k), n);
+    for (int k = j; k < nt; ++k) (*h)(j, k) = (*h)(k, j) = dot(scratch, columns[k], n);
   }
 }
 
@@ -205,7 +208,14 @@ RmrLevelResult RmrLevelSolver::solve(const RmrLevelSelection& sel, const cv::Mat
   RmrLevelResult result;
   const int ng = parameterCount(settings.model);
   const bool perspective = settings.model == MotionModel::kHomography;
-  const int nt = ng + (settings.illumination ? 2 : 0);
+  // The geometric parameters estimated here: all, or the translation only (the first two in every model).
+  const int active = settings.translation_only ? 2 : ng;
+  std::vector<const float*> columns;
+  for (int j = 0; j < active; ++j) columns.push_back(column(sel, j));
+  if (settings.illumination) {
+    columns.push_back(sel.value.data());
+    columns.push_back(nullptr);
+  }
   residuals_.resize(sel.count);
   weights_.resize(sel.count);
   magnitudes_.resize(sel.count);
@@ -227,8 +237,7 @@ RmrLevelResult RmrLevelSolver::solve(const RmrLevelSelection& sel, const cv::Mat
     if (evaluated < settings.min_evaluated) {
       result.failure = FailureReason::kMotionTooLarge;
       result.detail = "only " + std::to_string(evaluated) + " of " + std::to_string(sel.count) +
-                      " reference pixels land in the other image (need " + std::to_string(settings.min_evaluated) +
-                      ")";
+                      " reference pixels land in the other image (need " + std::to_string(settings.min_evaluated) + ")";
       return result;
     }
     // Robust scale: normalised median absolute residual (the residuals' median is ~0 near the solution), on a
@@ -239,26 +248,37 @@ RmrLevelResult RmrLevelSolver::solve(const RmrLevelSelection& sel, const cv::Mat
     float* mid = magnitudes_.data() + sampled / 2;
     std::nth_element(magnitudes_.data(), mid, magnitudes_.data() + sampled);
     result.scale = std::max(settings.min_scale, kMadToSigma * *mid);
-    accumulate(sel, nt, residuals_.data(), settings.tukey_constant * result.scale, weights_.data(), weighted_.data(),
-               scratch_.data(), &h, &b);
-    applyGain(ng, state->gain, &h, &b);
+    accumulate(sel, columns, residuals_.data(), settings.tukey_constant * result.scale, weights_.data(),
+               weighted_.data(), scratch_.data(), &h, &b);
+    applyGain(active, state->gain, &h, &b);
     result.normal_matrix = h;
     const ScaledCholesky cholesky(h);
     if (!cholesky.ok) {
       result.failure = FailureReason::kInconsistent;
-      result.detail = "the normal equations are singular or ill-conditioned (too little texture in some direction, "
-                      "or too few inliers)";
+      result.detail =
+          "the normal equations are singular or ill-conditioned (too little texture in some direction, "
+          "or too few inliers)";
       return result;
     }
-    // Inverse compositional update: W <- W o W(delta)^-1, since delta was linearised about the template A.
-    const SmallVector delta = cholesky.solve(b);
-    const Eigen::Matrix3d increment = centredMatrix(settings.model, Eigen::VectorXd(delta.head(ng)));
+    // Inverse compositional update: W <- W o W(delta)^-1, since delta was linearised about the template A. A step that
+    // would move an image corner by more than max_step_px is shortened (damping: far from the solution, or along a
+    // direction the texture hardly constrains, the linearisation does not hold that far).
+    SmallVector delta = cholesky.solve(b);
+    Eigen::VectorXd geometric = Eigen::VectorXd::Zero(ng);
+    geometric.head(active) = delta.head(active);
+    Eigen::Matrix3d increment = centredMatrix(settings.model, geometric);
+    const double step_px = cornerShift(increment, centre);
+    if (step_px > settings.max_step_px) {
+      delta *= settings.max_step_px / step_px;
+      geometric.head(active) = delta.head(active);
+      increment = centredMatrix(settings.model, geometric);
+    }
     Eigen::Matrix3d updated = state->centred * increment.inverse();
     updated /= updated(2, 2);
     state->centred = centredMatrix(settings.model, parametersFromCentred(settings.model, updated));
     if (settings.illumination) {
-      state->gain += delta[ng];
-      state->offset += delta[ng + 1];
+      state->gain += delta[active];
+      state->offset += delta[active + 1];
     }
     ++result.iterations;
     result.last_increment_px = cornerShift(increment, centre);

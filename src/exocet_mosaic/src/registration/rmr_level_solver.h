@@ -32,11 +32,13 @@ struct RmrSolverSettings {
   MotionModel model = MotionModel::kAffine;
   bool illumination = true;
   int max_iterations = 10;
-  double convergence_px = 0.01;      ///< stop when the increment moves no image corner by more (level pixels)
-  double tukey_constant = 4.6851;    ///< in units of the robust scale
-  double min_scale = 1.0;            ///< floor of the robust scale (grey levels)
-  int min_evaluated = 50;            ///< fewer reference pixels landing in the other image: the motion is too large
-  double divergence_px = 1e9;        ///< an image corner moved further than this (level pixels): diverged
+  double convergence_px = 0.01;    ///< stop when the increment moves no image corner by more (level pixels)
+  double tukey_constant = 4.6851;  ///< in units of the robust scale
+  double min_scale = 1.0;          ///< floor of the robust scale (grey levels)
+  int min_evaluated = 50;          ///< fewer reference pixels landing in the other image: the motion is too large
+  double divergence_px = 1e9;      ///< an image corner moved further than this (level pixels): diverged
+  double max_step_px = 1e9;        ///< longest corner displacement of one increment (level pixels), longer ones damped
+  bool translation_only = false;   ///< estimate the translation (and illumination) only, the rest kept as is
 };
 
 struct RmrLevelResult {
@@ -54,12 +56,12 @@ struct RmrLevelResult {
 /// Statistics of the final fit at the finest level.
 struct RmrFitStatistics {
   int evaluated = 0;
-  int inliers = 0;                    ///< weight > 0.5
-  double correlation = 0.0;           ///< normalised cross-correlation of A and the aligned B (robust weights)
-  double correlation_inflation = 1.0; ///< variance factor due to correlated neighbouring residuals (>= 1)
+  int inliers = 0;                     ///< weight > 0.5
+  double correlation = 0.0;            ///< normalised cross-correlation of A and the aligned B (robust weights)
+  double correlation_inflation = 1.0;  ///< variance factor due to correlated neighbouring residuals (>= 1)
   /// scale^2 * correlation_inflation * (J^T W J)^-1 of all the parameters at this level (empty if singular)
   Eigen::MatrixXd covariance;
-  cv::Mat weights;                    ///< CV_32F, the level's size: Tukey weight, NaN where not evaluated
+  cv::Mat weights;  ///< CV_32F, the level's size: Tukey weight, NaN where not evaluated
 };
 
 /// Geometric parameters of `model` from a centred matrix of that model normalised to m(2, 2) = 1.
@@ -82,7 +84,7 @@ class RmrLevelSolver {
 
  private:
   std::vector<float> residuals_;   ///< per selected pixel, NaN when not evaluated
-  std::vector<float> weights_;     ///< per selected pixel, NaN when not evaluated
+  std::vector<float> weights_;     ///< per selected pixel, its Tukey weight (0 when not evaluated)
   std::vector<float> magnitudes_;  ///< |residual| of the evaluated pixels, for the median
   std::vector<float> weighted_;    ///< per selected pixel, weight * residual
   std::vector<float> scratch_;     ///< per selected pixel, work array of the normal equations

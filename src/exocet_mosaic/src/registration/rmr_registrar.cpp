@@ -5,6 +5,8 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 #include <Eigen/Dense>
 
@@ -49,7 +51,8 @@ bool usableImage(const cv::Mat& image) {
 std::string describeImage(const cv::Mat& image) {
   if (image.empty()) return "an empty image";
   return "a " + std::to_string(image.cols) + "x" + std::to_string(image.rows) + " image of type " +
-         std::to_string(image.type()) + " (need CV_8UC1, " + std::to_string(kMinImageSide) + " to " + std::to_string(kMaxImageSide) + " px a side)";
+         std::to_string(image.type()) + " (need CV_8UC1, " + std::to_string(kMinImageSide) + " to " +
+         std::to_string(kMaxImageSide) + " px a side)";
 }
 
 MotionEstimate& fail(MotionEstimate& estimate, FailureReason reason, const std::string& detail) {
@@ -75,6 +78,7 @@ std::string RmrConfig::validate() const {
   range("max_iterations_per_level", max_iterations_per_level, 1, 200);
   open_low("convergence_px", convergence_px, 0.0, 1.0);
   open_low("coarse_convergence_px", coarse_convergence_px, 0.0, 1.0);
+  open_low("max_step_px", max_step_px, 0.0, 100.0);
   range("tukey_constant", tukey_constant, 1.0, 20.0);
   range("min_residual_scale", min_residual_scale, 0.01, 50.0);
   range("smoothing_sigma_px", smoothing_sigma_px, 0.0, 3.0);
@@ -220,6 +224,16 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
     return est;
   };
 
+  // Starting point (also the parameters reported by the failures found before the estimation).
+  if (!prediction_px.allFinite() || std::abs(prediction_px(2, 2)) < 1e-12)
+    return finish(FailureReason::kInvalidInput, "the prediction is not a finite, normalisable pixel matrix");
+  const Eigen::VectorXd predicted =
+      parametersFromPixelMatrix(model, prediction_px / prediction_px(2, 2), centre, size.width, size.height);
+  if (!predicted.allFinite())
+    return finish(FailureReason::kInvalidInput, "the prediction has no finite " + toString(model) + " parameters");
+  est.parameters = predicted;
+  est.pixel_matrix = pixelMatrix(model, est.parameters, centre);
+
   // Signal.
   const std::pair<const internal::RmrFrame*, const char*> frames[] = {{a, "previous"}, {&b, "current"}};
   for (const auto& [frame, name] : frames) {
@@ -227,19 +241,9 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
       return finish(FailureReason::kTooDark, std::string(name) + " image mean " + str(frame->mean()) +
                                                  " < min_mean_intensity " + str(config_.min_mean_intensity));
     if (frame->stddev() < config_.min_intensity_stddev)
-      return finish(FailureReason::kTooDark, std::string(name) + " image standard deviation " +
-                                                 str(frame->stddev()) + " < min_intensity_stddev " +
-                                                 str(config_.min_intensity_stddev));
+      return finish(FailureReason::kTooDark, std::string(name) + " image standard deviation " + str(frame->stddev()) +
+                                                 " < min_intensity_stddev " + str(config_.min_intensity_stddev));
   }
-
-  // Starting point.
-  if (!prediction_px.allFinite() || std::abs(prediction_px(2, 2)) < 1e-12)
-    return finish(FailureReason::kInvalidInput, "the prediction is not a finite, normalisable pixel matrix");
-  est.parameters = parametersFromPixelMatrix(model, prediction_px / prediction_px(2, 2), centre, size.width,
-                                             size.height);
-  est.pixel_matrix = pixelMatrix(model, est.parameters, centre);
-  if (!est.parameters.allFinite())
-    return finish(FailureReason::kInvalidInput, "the prediction has no finite " + toString(model) + " parameters");
 
   // Texture.
   const int levels = a->levels();
@@ -248,9 +252,9 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
   const internal::RmrLevelSelection& finest_selection = a->selection(finest);
   if (finest_selection.textured < config_.min_textured_pixels || finest_selection.count < min_level_pixels)
     return finish(FailureReason::kTooLittleTexture,
-                  std::to_string(finest_selection.textured) + " pixels with |gx| + |gy| >= " +
-                      str(config_.min_gradient) + " at level " + std::to_string(finest) +
-                      " < min_textured_pixels " + std::to_string(config_.min_textured_pixels));
+                  std::to_string(finest_selection.textured) +
+                      " pixels with |gx| + |gy| >= " + str(config_.min_gradient) + " at level " +
+                      std::to_string(finest) + " < min_textured_pixels " + std::to_string(config_.min_textured_pixels));
 
   // Coarse to fine.
   internal::RmrState state;
@@ -261,7 +265,9 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
   settings.max_iterations = config_.max_iterations_per_level;
   settings.tukey_constant = config_.tukey_constant;
   settings.min_scale = config_.min_residual_scale;
+  settings.max_step_px = config_.max_step_px;
   internal::RmrLevelResult last;
+  std::string skipped;  // coarse levels whose estimate was abandoned
   for (int level = levels - 1; level >= finest; --level) {
     const internal::RmrLevelSelection& selection = a->selection(level);
     if (level > finest && selection.count < min_level_pixels) {
@@ -272,15 +278,34 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
     settings.convergence_px = level == finest ? config_.convergence_px : config_.coarse_convergence_px;
     settings.min_evaluated = std::max(min_level_pixels, selection.count / 10);
     settings.divergence_px = 2.0 * config_.max_shift_fraction * std::hypot(target.cols, target.rows) + 2.0;
+    // The coarsest level (when two or more are above the finest) first estimates the translation alone: on a few
+    // hundred pixels of a smooth image, the other parameters are poorly determined (a rippled seabed constrains one
+    // direction only) and, from a distant start, would send the iterations astray.
+    internal::RmrState before = state;
+    if (level == levels - 1 && level >= finest + 2 && model != MotionModel::kTranslation) {
+      settings.translation_only = true;
+      last = solver_->solve(selection, target, a->centre(level), settings, &state);
+      est.iterations += last.iterations;
+      settings.translation_only = false;
+      if (last.failure == FailureReason::kNone) before = state;  // keep the translation if the full model fails
+      else state = before;
+    }
     last = solver_->solve(selection, target, a->centre(level), settings, &state);
     est.iterations += last.iterations;
-    if (getenv("RMR_DEBUG")) fprintf(stderr, "L%d: %d px, %d it, inc %.4f\n", level, selection.count, last.iterations, last.last_increment_px);
     if (last.failure != FailureReason::kNone) {
+      if (level > finest) {
+        // A coarse level is only a starting point: go on from the previous one's, one level finer.
+        skipped += (skipped.empty() ? "" : ", ") + std::to_string(level) + " (" + last.detail + ")";
+        state = before;
+        state.centred = toLevel(state.centred, -1);
+        continue;
+      }
       if (state.centred.allFinite()) {
         est.parameters = internal::parametersFromCentred(model, toLevelZero(state.centred, level));
         est.pixel_matrix = pixelMatrix(model, est.parameters, centre);
       }
-      return finish(last.failure, "level " + std::to_string(level) + ": " + last.detail);
+      return finish(last.failure, "level " + std::to_string(level) + ": " + last.detail +
+                                      (skipped.empty() ? "" : "; coarser levels abandoned: " + skipped));
     }
     if (level > finest) state.centred = toLevel(state.centred, -1);
   }
@@ -294,23 +319,21 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
   est.inlier_fraction = stats.evaluated > 0 ? double(stats.inliers) / stats.evaluated : 0.0;
   est.residual_scale = last.scale;
   est.weights = stats.weights;
-  if (getenv("RMR_DEBUG")) fprintf(stderr, "DEBUG inflation %.3f scale %.3f corr %.3f gain %.3f offset %.2f\n", stats.correlation_inflation, last.scale, stats.correlation, state.gain, state.offset);
   if (stats.covariance.rows() >= ng) {
     // Parameters of level `finest` to level 0: translations x 2^L, perspective terms / 2^L.
     Eigen::VectorXd to_zero = Eigen::VectorXd::Ones(ng);
     to_zero.head<2>().setConstant(std::ldexp(1.0, finest));
     if (model == MotionModel::kHomography) to_zero.tail<2>().setConstant(std::ldexp(1.0, -finest));
-    est.covariance =
-        config_.covariance_inflation * to_zero.asDiagonal() * stats.covariance.topLeftCorner(ng, ng) *
-        to_zero.asDiagonal();
+    est.covariance = config_.covariance_inflation * to_zero.asDiagonal() * stats.covariance.topLeftCorner(ng, ng) *
+                     to_zero.asDiagonal();
   }
 
   // Acceptance.
   if (!last.converged && last.last_increment_px > config_.not_converged_px)
-    return finish(FailureReason::kNotConverged,
-                  "last increment " + str(last.last_increment_px) + " px (level " + std::to_string(finest) +
-                      ") > not_converged_px " + str(config_.not_converged_px) + " after " +
-                      std::to_string(last.iterations) + " iterations");
+    return finish(FailureReason::kNotConverged, "last increment " + str(last.last_increment_px) + " px (level " +
+                                                    std::to_string(finest) + ") > not_converged_px " +
+                                                    str(config_.not_converged_px) + " after " +
+                                                    std::to_string(last.iterations) + " iterations");
   const Eigen::Matrix3d centred0 = centredMatrix(model, est.parameters);
   const double diagonal = std::hypot(size.width, size.height);
   const double shift = internal::cornerShift(centred0, centre);
@@ -319,16 +342,17 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
                                                       str(config_.max_shift_fraction) + " of the diagonal");
   const double scale = std::sqrt(std::abs(centred0.topLeftCorner<2, 2>().determinant()));
   if (!(scale <= 1.0 + config_.max_scale_change && scale >= 1.0 / (1.0 + config_.max_scale_change)))
-    return finish(FailureReason::kMotionTooLarge,
-                  "scale change " + str(scale) + " outside 1 +- max_scale_change " + str(config_.max_scale_change));
+    return finish(FailureReason::kMotionTooLarge, "scale change " + str(scale) +
+                                                      " outside [1 / (1 + x), 1 + x] with x = max_scale_change " +
+                                                      str(config_.max_scale_change));
   if (config_.estimate_illumination && !(state.gain >= config_.min_gain && state.gain <= config_.max_gain))
     return finish(FailureReason::kInconsistent, "illumination gain " + str(state.gain) + " outside [" +
                                                     str(config_.min_gain) + ", " + str(config_.max_gain) + "]");
   if (est.inlier_fraction < config_.min_inlier_fraction || est.inliers < config_.min_inliers)
     return finish(FailureReason::kTooFewInliers,
                   std::to_string(est.inliers) + " inliers of " + std::to_string(est.observations) +
-                      " evaluated pixels (need a fraction >= " + str(config_.min_inlier_fraction) + " and >= " +
-                      std::to_string(config_.min_inliers) + ")");
+                      " evaluated pixels (need a fraction >= " + str(config_.min_inlier_fraction) +
+                      " and >= " + std::to_string(config_.min_inliers) + ")");
   if (est.residual_scale > config_.max_residual_scale)
     return finish(FailureReason::kInconsistent, "residual scale " + str(est.residual_scale) +
                                                     " grey levels > max_residual_scale " +

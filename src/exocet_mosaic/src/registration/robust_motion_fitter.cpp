@@ -43,6 +43,8 @@ using Vec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxParameters, 1>;
 using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxParameters, kMaxParameters>;
 // Median of the norm of a 2D residual with N(0, sigma^2) components is sigma * sqrt(2 ln 2) (Rayleigh).
 constexpr double kRayleighMedian = 1.1774100225154747;
+// ... and its 20 % quantile is sigma * sqrt(-2 ln 0.8).
+constexpr double kRayleighFifth = 0.66805205325;
 // Below this reciprocal condition number (normalised coordinates) the points do not determine the model.
 constexpr double kMinReciprocalCondition = 1e-12;
 
@@ -156,6 +158,43 @@ class NormalEquations {
   double a_[kMaxParameters][kMaxParameters];
   double b_[kMaxParameters];
 };
+
+// Scale of the difference between the residual of each inlier and that of its nearest inlier neighbour: the
+// tracking noise when the residuals come from one surface (where the model errs - relief, lens distortion - it errs
+// alike at neighbouring points), the residual scale itself when neighbouring points move independently (marine snow
+// at various depths). Per coordinate, like the residual scale.
+template <typename Points, typename Residual>
+double localScale(const Points& points, const std::vector<uint8_t>& inlier, const Residual& residual_of) {
+  std::vector<int> index;
+  for (size_t i = 0; i < inlier.size(); ++i)
+    if (inlier[i]) index.push_back(static_cast<int>(i));
+  if (index.size() < 2) return 0.0;
+  // Sorted along u, the nearest neighbour search stops once the u gap alone exceeds the best distance.
+  std::sort(index.begin(), index.end(), [&](int a, int b) { return points[a].u < points[b].u; });
+  const int n = static_cast<int>(index.size());
+  std::vector<Eigen::Vector2d> residual(n);
+  for (int k = 0; k < n; ++k) residual[k] = residual_of(points[index[k]]);
+  std::vector<double> difference(n);
+  for (int k = 0; k < n; ++k) {
+    const auto& a = points[index[k]];
+    double nearest = std::numeric_limits<double>::infinity();
+    int best = k;
+    for (int direction : {-1, 1}) {
+      for (int m = k + direction; m >= 0 && m < n; m += direction) {
+        const auto& b = points[index[m]];
+        const double du = b.u - a.u;
+        if (du * du >= nearest) break;
+        const double d = du * du + (b.v - a.v) * (b.v - a.v);
+        if (d < nearest) nearest = d, best = m;
+      }
+    }
+    difference[k] = (residual[k] - residual[best]).norm();
+  }
+  // The difference of two independent residuals has sqrt(2) times their scale.
+  const size_t mid = difference.size() / 2;
+  std::nth_element(difference.begin(), difference.begin() + mid, difference.end());
+  return difference[mid] / (kRayleighMedian * std::sqrt(2.0));
+}
 
 double median(std::vector<double>* values) {
   if (values->empty()) return 0.0;
@@ -401,21 +440,31 @@ RobustFit RobustMotionFitter::fitNormalised(const std::vector<Correspondence>& p
     return result;
   }
 
+  auto count = [](const std::vector<uint8_t>& set) { return static_cast<int>(std::count(set.begin(), set.end(), 1)); };
+
   // --- 2. Re-weighted least squares (Tukey), striking off points beyond rejection_k * sigma ---
+  // The first inlier set: within rejection_k * sigma0 of the best hypothesis, sigma0 from the lowest fifth of the
+  // residuals rather than from those within sample_threshold_px. False matches that agree among themselves (marine
+  // snow at various depths) would otherwise enter that set by the dozen and drag the fit away from the seabed.
   std::vector<uint8_t> inlier(n), next_inlier(n);
-  compute_residuals(best);
-  for (int i = 0; i < n; ++i) inlier[i] = residual[i] <= threshold;
-  q = best;
   std::vector<double> inlier_residuals;
   inlier_residuals.reserve(n);
   const double min_scale = config_.min_scale_px / scale_px;
+  compute_residuals(best);
+  inlier_residuals = residual;
+  const int low = std::max(minimal, n / 5) - 1;
+  std::nth_element(inlier_residuals.begin(), inlier_residuals.begin() + low, inlier_residuals.end());
+  const double sigma0 = std::max(min_scale, inlier_residuals[low] / kRayleighFifth);
+  for (int i = 0; i < n; ++i) inlier[i] = residual[i] <= config_.rejection_k * sigma0;
+  if (count(inlier) < minimal)
+    for (int i = 0; i < n; ++i) inlier[i] = residual[i] <= threshold;
+  q = best;
   auto robust_scale = [&](const std::vector<uint8_t>& set) {
     inlier_residuals.clear();
     for (int i = 0; i < n; ++i)
       if (set[i]) inlier_residuals.push_back(residual[i]);
     return std::max(min_scale, median(&inlier_residuals) / kRayleighMedian);
   };
-  auto count = [](const std::vector<uint8_t>& set) { return static_cast<int>(std::count(set.begin(), set.end(), 1)); };
 
   for (int i = 0; i < n; ++i) weight[i] = inlier[i];
   if (!full_fit(best, weight, &q) || !plausible(q)) q = best;
@@ -488,6 +537,11 @@ RobustFit RobustMotionFitter::fitNormalised(const std::vector<Correspondence>& p
   result.inliers = inliers;
   result.inlier_fraction = static_cast<double>(inliers) / n;
   result.residual_scale_px = sigma * scale_px;
+  result.local_scale_px = localScale(points, inlier,
+                                     [&](const Correspondence& c) -> Eigen::Vector2d {
+                                       return warp(model, q, c.u, c.v) - Eigen::Vector2d(c.tu, c.tv);
+                                     }) *
+                          scale_px;
   result.iterations = iterations;
   const Vec q_px = q.array() * d.array();
   result.parameters = q_px;

@@ -51,6 +51,20 @@ void readKlt(const SectionReader& s, registration::KltConfig* c) {
   s.number("max_motion_fraction", &c->max_motion_fraction);
   s.number("min_mean_grey", &c->min_mean_grey);
   s.number("min_contrast_grey", &c->min_contrast_grey);
+  s.flag("derivatives_on_demand", &c->derivatives_on_demand);
+  s.number("consensus_threshold_px", &c->consensus_threshold_px);
+  s.number("max_local_residual_px", &c->max_local_residual_px);
+  s.number("covariance_inflation", &c->covariance_inflation);
+}
+
+void readIllumination(const SectionReader& s, registration::IlluminationNormalizerConfig* c) {
+  s.flag("enabled", &c->enabled);
+  s.integer("level", &c->level);
+  s.number("sigma_level_px", &c->sigma_level_px);
+  s.number("min_contrast_grey", &c->min_contrast_grey);
+  s.number("output_gain", &c->output_gain);
+  s.number("min_mean_grey", &c->min_mean_grey);
+  s.number("min_stddev_grey", &c->min_stddev_grey);
 }
 
 void readRmr(const SectionReader& s, registration::RmrConfig* c) {
@@ -62,6 +76,7 @@ void readRmr(const SectionReader& s, registration::RmrConfig* c) {
   s.number("coarse_convergence_px", &c->coarse_convergence_px);
   s.number("tukey_constant", &c->tukey_constant);
   s.number("min_residual_scale", &c->min_residual_scale);
+  s.number("smoothing_sigma_px", &c->smoothing_sigma_px);
   s.number("min_gradient", &c->min_gradient);
   s.number("pixel_fraction", &c->pixel_fraction);
   s.integer("min_pixels_per_level", &c->min_pixels_per_level);
@@ -96,8 +111,10 @@ registration::RegistrationConfig readRegistrationConfig(const ros::NodeHandle& p
   config.model = reg::motionModelFromString(model);
   readKlt(SectionReader{reader, "klt"}, &config.klt);
   readRmr(SectionReader{reader, "rmr"}, &config.rmr);
+  readIllumination(SectionReader{reader, "illumination"}, &config.illumination);
   const std::string error = config.validate();
-  if (!error.empty()) throw std::invalid_argument("registration parameters (~klt/..., ~rmr/...): " + error);
+  if (!error.empty())
+    throw std::invalid_argument("registration parameters (~klt/..., ~rmr/..., ~illumination/...): " + error);
   return config;
 }
 

@@ -184,8 +184,11 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
       ROS_WARN_THROTTLE(30.0, "registration: %s; registering the images as they are", last_problem_.c_str());
     } else if (info_size == gray.size() && !undistorter_.sameCalibration(info_size, k, d)) {
       try {
-        undistorter_ = reg::ImageUndistorter(info_size, k, d);
-        if (have_previous_) restart("the camera calibration changed");
+        reg::ImageUndistorter next(info_size, k, d);
+        // Only a change of the image geometry breaks the sequence (not a first camera_info without distortion).
+        const bool geometry_changes = undistorter_.active() || next.active();
+        undistorter_ = next;
+        if (have_previous_ && geometry_changes) restart("the camera calibration changed");
         ROS_INFO("registration: %s", undistorter_.active() ? "undistorting the images with the camera_info"
                                                            : "the camera_info has no distortion");
       } catch (const std::invalid_argument& e) {

@@ -3,8 +3,9 @@
  * @brief RMR: robust multiresolution estimation of a parametric motion model from the image intensities (Odobez and
  * Bouthemy 1995; 2D3 report, section 3.2). Dense (no features): it registers the whole texture. No ROS in it.
  *
- * Method. Both images are reduced to Gaussian pyramids. From the coarsest level to the finest, the motion is refined
- * by incremental Gauss-Newton steps on the linearised optical-flow constraint
+ * Method. Both images are slightly smoothed (smoothing_sigma_px) and reduced to Gaussian pyramids (each image once:
+ * registerNext keeps the current image's pyramid for the next call). From the coarsest level to the finest, the
+ * motion is refined by incremental Gauss-Newton steps on the linearised optical-flow constraint
  *     gain * grad(A) . (dW/dp dp) + A dgain + doffset = B(W(x; p)) - gain * A(x) - offset
  * written inverse-compositionally (the gradients of the reference image A and the warp Jacobian at the identity are
  * computed once per level; B is sampled, bilinearly, only at the warped positions of the selected pixels of A). Each
@@ -14,14 +15,19 @@
  * terms / 2). Optional global illumination parameters (gain, offset) make it insensitive to a change of exposure or
  * lighting (Odobez-Bouthemy's Theta = (A, zeta)).
  *
- * Pixels. At each level of A, the pixels with the strongest gradients (|gx| + |gy|) are kept: a fraction of the
- * level's pixels, within [min, max] counts and above a minimum gradient. Only they are evaluated, which bounds the
+ * Pixels. Each level of A is divided into cells (about 2.5 per pixel wanted), and each cell offers its strongest
+ * gradient (|gx| + |gy|, above min_gradient); the strongest of these are kept: a fraction of the level's pixels,
+ * within [min, max] counts. The pixels spread over the image (good conditioning), and a small bright blob (marine
+ * snow, a particle), whose rim has the strongest gradients of a turbid image, yields a few pixels rather than many,
+ * so that outliers stay the minority a robust estimator needs. Only the kept pixels are evaluated, which bounds the
  * cost whatever the image size.
  *
  * Covariance. sigma^2 (J^T W J)^-1 at the final iteration (sigma: robust residual scale), inflated by a measured
  * factor for the correlation of neighbouring residuals (interpolation, pyramid smoothing, camera noise): the ratio,
- * in the metric (J^T W J)^-1, of the score covariance counting the pairs of neighbouring selected pixels to the one
- * assuming independent pixels (an effective-sample correction, >= 1), times RmrConfig::covariance_inflation.
+ * in the metric (J^T W J)^-1, of the score covariance counting the pairs of pixels of neighbouring cells to the one
+ * assuming independent pixels (an effective-sample correction, >= 1), times RmrConfig::covariance_inflation. This
+ * accounts for the image noise (calibrated on synthetic pairs); errors of the imaging model (a lamp pattern fixed in
+ * the image, parallax, lens distortion) are not in it, hence covariance_inflation for real or rendered dives.
  *
  * Failures are explicit (never a confident wrong answer): see RmrConfig for the thresholds of each FailureReason.
  */
@@ -56,23 +62,25 @@ struct RmrConfig {
   int max_iterations_per_level = 12;   ///< [1, 200] Gauss-Newton/IRLS iterations at most per level
   double convergence_px = 0.01;        ///< (0, 1] finest level: stop when an increment moves no corner further
   double coarse_convergence_px = 0.2;  ///< (0, 1] same at the coarser levels (their estimate is refined anyway)
+  double max_step_px = 2.0;            ///< (0, 100] longest corner displacement of one increment (pixels of the
+                                       ///< level); longer steps are shortened (damped Gauss-Newton)
 
   // --- Robust estimation ---
-  double tukey_constant = 4.6851;  ///< [1, 20] Tukey biweight cutoff, in robust scales (4.685: 95 % efficiency)
-  double min_residual_scale = 1.0; ///< [0.01, 50] floor of the robust residual scale (grey levels)
+  double tukey_constant = 4.6851;   ///< [1, 20] Tukey biweight cutoff, in robust scales (4.685: 95 % efficiency)
+  double min_residual_scale = 1.0;  ///< [0.01, 50] floor of the robust residual scale (grey levels)
 
   // --- Image preparation ---
   /// [0, 3] Gaussian pre-smoothing of the full-resolution images (pixels; 0: none). Band-limits the images so that the
-  /// bilinear interpolation of B is nearly exact: without it, the interpolation's own smoothing (strongest at half-pixel
-  /// positions) leaves residuals of several grey levels on sharp texture, which inflate the robust scale.
+  /// bilinear interpolation of B is nearly exact: without it, the interpolation's own smoothing (strongest at
+  /// half-pixel positions) leaves residuals of several grey levels on sharp texture, which inflate the robust scale.
   double smoothing_sigma_px = 0.8;
 
   // --- Pixel selection (per level, in the reference image) ---
-  double min_gradient = 2.0;       ///< [0, 255] |gx| + |gy| below which a pixel is never used
-  double pixel_fraction = 0.15;    ///< (0, 1] share of the level's pixels kept, strongest gradients first
-  int min_pixels_per_level = 3000; ///< [0, 10^7] ... but at least this many when the level has them
-  int max_pixels_per_level = 16000;///< [100, 10^7] ... and at most this many at the finest level, a quarter as
-                                   ///< many a level coarser and so on (bounds the cost per iteration)
+  double min_gradient = 2.0;         ///< [0, 255] |gx| + |gy| below which a pixel is never used
+  double pixel_fraction = 0.15;      ///< (0, 1] share of the level's pixels kept, strongest gradients first
+  int min_pixels_per_level = 3000;   ///< [0, 10^7] ... but at least this many when the level has them
+  int max_pixels_per_level = 16000;  ///< [100, 10^7] ... and at most this many at the finest level, a quarter as
+                                     ///< many a level coarser and so on (bounds the cost per iteration)
 
   // --- Illumination ---
   bool estimate_illumination = true;  ///< also estimate B = gain * A + offset
@@ -111,8 +119,8 @@ struct RmrConfig {
  * outlier, e.g. a fish, a particle, a moving shadow), and NaN where the pixel was not evaluated (not selected: weak
  * gradient, border; or warped outside the other image). `observations` counts the evaluated pixels at that level,
  * `inliers` those of weight > 0.5, `residual_scale` is in grey levels. On a failure detected before the estimation
- * (invalid input, too dark, too little texture), `parameters` are the prediction's and `covariance` and `weights`
- * are empty; on a later failure they are the rejected estimate's.
+ * (too dark, too little texture), `parameters` are the prediction's (zero on invalid input and kNoPreviousFrame) and
+ * `covariance` and `weights` are empty; on a later failure they are those of the rejected estimate.
  */
 class RmrRegistrar : public FrameRegistrar {
  public:

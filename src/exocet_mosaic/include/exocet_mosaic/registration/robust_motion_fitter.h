@@ -9,7 +9,9 @@
  *     fit of all points, and hypotheses from minimal samples drawn with a seeded generator (adaptive count, so that
  *     a clean set costs a handful of samples and a set with many false matches is still handled);
  *  2. iteratively re-weighted least squares with Tukey's biweight, the scale sigma being the robust (median) scale of
- *     the current inliers' residuals, and points beyond rejection_k * sigma struck off;
+ *     the current inliers' residuals, and points beyond rejection_k * sigma struck off (the first inlier set is taken
+ *     with a scale from the lowest fifth of the residuals, so that many false matches that roughly agree among
+ *     themselves cannot enter it);
  *  3. plain least squares on the inlier set, repeated until that set no longer changes (the acceptance criterion).
  * The linear models (translation, similarity, affine) are solved directly; the homography by Gauss-Newton on the
  * geometric error, started from a linear (DLT) solve. Everything runs in centred coordinates normalised by the RMS
@@ -72,7 +74,11 @@ struct RobustFit {
   int inliers = 0;
   double inlier_fraction = 0.0;
   double residual_scale_px = 0.0;  ///< per-coordinate RMS residual of the inliers (degrees of freedom corrected)
-  int iterations = 0;              ///< least-squares solves (Gauss-Newton steps for the homography) in all
+  /// Robust scale of the difference between the residuals of neighbouring inliers (divided by sqrt 2): the tracking
+  /// noise when the points move with one surface, however well the model fits that surface; as large as the
+  /// residual scale when neighbouring points move independently (particles at various depths).
+  double local_scale_px = 0.0;
+  int iterations = 0;  ///< least-squares solves (Gauss-Newton steps for the homography) in all
 };
 
 /**
