@@ -16,6 +16,13 @@ namespace {
 constexpr int kBorder = 2;
 // Candidates (one per cell) per pixel wanted: the cell size follows from it.
 constexpr double kCandidatesPerPixel = 2.5;
+// Histogram of the candidates' magnitudes (|gx| + |gy|, grey levels per pixel), in eighths of a grey level.
+constexpr int kHistogramBinsPerGrey = 8;
+constexpr int kHistogramBins = 512 * kHistogramBinsPerGrey;
+
+inline int histogramBin(float magnitude) {
+  return std::min(kHistogramBins - 1, static_cast<int>(magnitude * kHistogramBinsPerGrey));
+}
 
 // Steepest-descent vector grad(I) . dW/dp at the identity, for the parameterisation of motion_model.h, written to
 // out[0], out[stride], out[2 * stride]...
@@ -53,7 +60,6 @@ RmrFrame::RmrFrame(const cv::Mat& gray, int levels, const RmrSelectionParameters
   if (recycled) {
     levels_ = std::move(recycled->levels_);
     selections_ = std::move(recycled->selections_);
-    magnitude_scratch_ = std::move(recycled->magnitude_scratch_);
     candidate_magnitude_ = std::move(recycled->candidate_magnitude_);
     candidate_index_ = std::move(recycled->candidate_index_);
     candidate_cell_ = std::move(recycled->candidate_cell_);
@@ -114,7 +120,7 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
                      std::lround(parameters_.max_pixels * std::ldexp(1.0, 2 * (parameters_.finest_level - level))));
   long target = std::lround(parameters_.pixel_fraction * interior);
   target = std::min<long>(std::max<long>(target, parameters_.min_pixels), max_pixels);
-  const int cell = std::max(1, static_cast<int>(std::sqrt(interior / (kCandidatesPerPixel * target))));
+  const int cell = std::max(1, static_cast<int>(std::lround(std::sqrt(interior / (kCandidatesPerPixel * target)))));
   const int cells_x = (inner_w + cell - 1) / cell;
   std::vector<float>& band_max = band_max_;  // per column, the largest magnitude of the band's rows
   std::vector<int>& band_row = band_row_;    // ... and its row
@@ -159,40 +165,42 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
       candidate_cell.resize(2 * (candidates + cells_x));
       candidate_magnitude.resize(2 * (candidates + cells_x));
     }
+    // Branch-free (conditional moves; each candidate is written, and kept by advancing the count): the comparisons
+    // are unpredictable.
     for (int cx = 0, c0 = 0; cx < cells_x; ++cx, c0 += cell) {
       const int c1 = std::min(c0 + cell, inner_w);
       int best = c0;
-      for (int c = c0 + 1; c < c1; ++c)
-        if (bm[c] > bm[best]) best = c;
-      if (bm[best] < min_gradient) continue;
+      float best_magnitude = bm[c0];
+      for (int c = c0 + 1; c < c1; ++c) {
+        const bool larger = bm[c] > best_magnitude;
+        best = larger ? c : best;
+        best_magnitude = larger ? bm[c] : best_magnitude;
+      }
       candidate_index[candidates] = (br[best] << 16) + best + kBorder;
       candidate_cell[candidates] = (cell_row << 16) + cx;
-      candidate_magnitude[candidates] = bm[best];
-      ++candidates;
+      candidate_magnitude[candidates] = best_magnitude;
+      candidates += best_magnitude >= min_gradient;
     }
   }
   sel.textured = static_cast<int>(textured);
   if (candidates == 0) return sel;
 
-  // The `target` strongest candidates: all those above the boundary magnitude and an even share (in raster order) of
-  // those equal to it.
-  float boundary = -1.0f;
+  // The `target` strongest candidates, from a fine histogram of their magnitudes (cheaper than a selection
+  // algorithm): all those of the bins above the boundary bin, and an even share (in raster order) of that bin's.
+  int boundary = -1;
   long boundary_keep = 0, boundary_count = 0;
   if (static_cast<long>(candidates) > target) {
-    std::vector<float>& m = magnitude_scratch_;
-    m.assign(candidate_magnitude.begin(), candidate_magnitude.begin() + candidates);
-    auto nth = m.end() - target;
-    std::nth_element(m.begin(), nth, m.end());
-    boundary = *nth;
+    std::vector<int>& histogram = histogram_;
+    histogram.assign(kHistogramBins, 0);
+    for (size_t i = 0; i < candidates; ++i) ++histogram[histogramBin(candidate_magnitude[i])];
     long above = 0;
-    for (size_t i = 0; i < candidates; ++i) {
-      above += candidate_magnitude[i] > boundary;
-      boundary_count += candidate_magnitude[i] == boundary;
-    }
+    boundary = kHistogramBins - 1;
+    while (above + histogram[boundary] < target) above += histogram[boundary--];
+    boundary_count = histogram[boundary];
     boundary_keep = target - above;
   }
 
-  const size_t reserve = boundary_count > 0 ? static_cast<size_t>(target) : candidates;
+  const size_t reserve = boundary >= 0 ? static_cast<size_t>(target) : candidates;
   sel.x.resize(reserve);
   sel.y.resize(reserve);
   sel.value.resize(reserve);
@@ -209,9 +217,9 @@ const RmrLevelSelection& RmrFrame::selection(int level) {
   const Eigen::Vector2d centre_px = centre(level);
   long boundary_seen = 0;
   for (size_t i = 0; i < candidates; ++i) {
-    const float magnitude_i = candidate_magnitude[i];
-    if (magnitude_i < boundary) continue;
-    if (magnitude_i == boundary) {
+    const int bin = boundary >= 0 ? histogramBin(candidate_magnitude[i]) : 0;
+    if (bin < boundary) continue;
+    if (bin == boundary) {
       const long before = boundary_seen * boundary_keep / boundary_count;
       ++boundary_seen;
       if (boundary_seen * boundary_keep / boundary_count == before) continue;

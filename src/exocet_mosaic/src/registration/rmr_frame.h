@@ -81,7 +81,8 @@ class RmrFrame {
   std::vector<RmrLevelSelection> selections_;
   std::vector<bool> selected_;  ///< selections_[level] is built
   // Scratch of the selection, kept for reuse.
-  std::vector<float> magnitude_scratch_, candidate_magnitude_;
+  std::vector<float> candidate_magnitude_;
+  std::vector<int> histogram_;
   std::vector<int> candidate_index_, candidate_cell_, band_row_;
   std::vector<float> band_max_;
   std::vector<int> row_index_[2], row_of_[2];

@@ -16,7 +16,7 @@ namespace {
 constexpr double kMadToSigma = 1.4826;  // MAD of a Gaussian = 0.6745 sigma
 constexpr int kMaxParameters = 10;      // 8 geometric + gain + offset
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kMedianSample = 4096;       // residuals used for the robust scale
+constexpr int kMedianSample = 2048;       // residuals used for the robust scale
 constexpr int kCorrelationSample = 2000;  // pixels used to measure the residuals' spatial correlation
 
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxParameters, kMaxParameters>;
@@ -359,7 +359,11 @@ RmrFitStatistics RmrLevelSolver::statistics(const RmrLevelSelection& sel, cv::Si
       const float* cj = column(sel, j);
       a[j] = we * (cj ? cj[i] : 1.0f) * (j < ng ? state.gain : 1.0);
     }
-    *z = q * a;
+    for (int j = 0; j < nt; ++j) {  // z = q a, by hand: Eigen's general product is slow for such small sizes
+      double v = 0.0;
+      for (int k = 0; k < nt; ++k) v += q(j, k) * a[k];
+      (*z)[j] = v;
+    }
     return true;
   };
   const int step = std::max(1, n / kCorrelationSample);

@@ -287,8 +287,10 @@ MotionEstimate RmrRegistrar::estimate(internal::RmrFrame* a, const internal::Rmr
       last = solver_->solve(selection, target, a->centre(level), settings, &state);
       est.iterations += last.iterations;
       settings.translation_only = false;
-      if (last.failure == FailureReason::kNone) before = state;  // keep the translation if the full model fails
-      else state = before;
+      if (last.failure == FailureReason::kNone)
+        before = state;  // keep the translation if the full model fails
+      else
+        state = before;
     }
     last = solver_->solve(selection, target, a->centre(level), settings, &state);
     est.iterations += last.iterations;

@@ -13,7 +13,10 @@
  * (floored); the increment is composed into the estimate, and the level stops when it moves no image corner by more
  * than the convergence threshold. The estimate then goes to the next finer level (translation x 2, perspective
  * terms / 2). Optional global illumination parameters (gain, offset) make it insensitive to a change of exposure or
- * lighting (Odobez-Bouthemy's Theta = (A, zeta)).
+ * lighting (Odobez-Bouthemy's Theta = (A, zeta)). Safeguards for poorly textured or periodic seabeds (ripples): the
+ * coarsest level estimates the translation before the full model, a step longer than max_step_px is shortened, and a
+ * coarse level that fails (diverges, loses the overlap) is abandoned, the next level starting from the previous
+ * estimate; only a failure at the finest level fails the registration.
  *
  * Pixels. Each level of A is divided into cells (about 2.5 per pixel wanted), and each cell offers its strongest
  * gradient (|gx| + |gy|, above min_gradient); the strongest of these are kept: a fraction of the level's pixels,
