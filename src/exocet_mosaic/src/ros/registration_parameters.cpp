@@ -74,6 +74,7 @@ void readRmr(const SectionReader& s, registration::RmrConfig* c) {
   s.integer("max_iterations_per_level", &c->max_iterations_per_level);
   s.number("convergence_px", &c->convergence_px);
   s.number("coarse_convergence_px", &c->coarse_convergence_px);
+  s.number("max_step_px", &c->max_step_px);
   s.number("tukey_constant", &c->tukey_constant);
   s.number("min_residual_scale", &c->min_residual_scale);
   s.number("smoothing_sigma_px", &c->smoothing_sigma_px);

@@ -60,7 +60,7 @@ struct MotionEstimate {
   double elapsed_ms = 0.0;      ///< wall time of the estimation
 
   /// RMR: final robust weights in [0, 1] at the finest level used (CV_32F, that level's size; 0 = outlier such as a
-  /// fish or a particle). KLT: empty.
+  /// fish or a particle; NaN where a pixel was not evaluated, see rmr_registrar.h). KLT: empty.
   cv::Mat weights;
 };
 
