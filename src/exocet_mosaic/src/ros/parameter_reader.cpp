@@ -94,6 +94,23 @@ void ParameterReader::readString(const std::string& name, std::string* value, co
   *value = v;
 }
 
+void ParameterReader::readOptionalString(const std::string& name, std::string* value,
+                                         const std::string& meaning) const {
+  XmlRpc::XmlRpcValue raw;
+  if (!fetch(name, &raw)) return;
+  if (raw.getType() != XmlRpc::XmlRpcValue::TypeString)
+    throw std::invalid_argument(describe(name) + " must be a string (" + meaning + "), got '" + valueText(raw) + "'");
+  *value = static_cast<std::string>(raw);
+}
+
+void ParameterReader::readOptionalTopic(const std::string& name, std::string* topic) const {
+  readOptionalString(name, topic, "a topic name, or empty to turn it off");
+  std::string why;
+  if (!topic->empty() && !ros::names::validate(*topic, why))
+    throw std::invalid_argument(describe(name) + " '" + *topic + "' is not a valid topic name" +
+                                (why.empty() ? std::string() : ": " + why));
+}
+
 void ParameterReader::readTopic(const std::string& name, std::string* topic) const {
   readString(name, topic, {}, "a topic name");
   std::string why;

@@ -31,6 +31,10 @@ class ParameterReader {
                   const std::string& meaning) const;
   /// A valid, non-empty ROS graph resource name.
   void readTopic(const std::string& name, std::string* topic) const;
+  /// A valid ROS graph resource name, or "" for an input or output the user turns off.
+  void readOptionalTopic(const std::string& name, std::string* topic) const;
+  /// Any string, the empty one included (e.g. a file path where "" means "do not write").
+  void readOptionalString(const std::string& name, std::string* value, const std::string& meaning) const;
 
   /// "parameter ~name (/resolved/name)", for messages.
   std::string describe(const std::string& name) const;
