@@ -34,6 +34,25 @@ def lat_lon_to_utm(lat_deg, lon_deg, zone, northern):
     return 500000.0 + k0 * big_a * eta, (0.0 if northern else 10000000.0) + k0 * big_a * xi
 
 
+def utm_to_lat_lon(easting_m, northing_m, zone, northern):
+    """UTM -> WGS 84 by Newton iterations on lat_lon_to_utm (numerical Jacobian): to well under a millimetre."""
+    lat = (northing_m - (0.0 if northern else 10000000.0)) / 111000.0
+    lon = 6.0 * zone - 183.0 + (easting_m - 500000.0) / (111000.0 * max(0.1, math.cos(math.radians(lat))))
+    for _ in range(20):
+        e, n = lat_lon_to_utm(lat, lon, zone, northern)
+        d = 1e-6
+        e_lat, n_lat = lat_lon_to_utm(lat + d, lon, zone, northern)
+        e_lon, n_lon = lat_lon_to_utm(lat, lon + d, zone, northern)
+        j = [[(e_lat - e) / d, (e_lon - e) / d], [(n_lat - n) / d, (n_lon - n) / d]]
+        det = j[0][0] * j[1][1] - j[0][1] * j[1][0]
+        re, rn = easting_m - e, northing_m - n
+        lat += (j[1][1] * re - j[0][1] * rn) / det
+        lon += (-j[1][0] * re + j[0][0] * rn) / det
+        if abs(re) < 1e-5 and abs(rn) < 1e-5:
+            break
+    return lat, lon
+
+
 def stamp_text(stamp):
     """A ROS time as the loggers print it: seconds and nanoseconds, exactly."""
     return '%d.%09d' % (stamp.secs, stamp.nsecs)

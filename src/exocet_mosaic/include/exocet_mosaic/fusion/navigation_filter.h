@@ -1,0 +1,226 @@
+/**
+ * @file navigation_filter.h
+ * @brief The 2D3 report's Kalman filter (section 3.5: UTM position of the camera + pixel-size correction, corrected
+ * by the navigation), extended: heading error of the attitude, dead-reckoning offset, late (out-of-sequence) USBL
+ * fixes, gating with recovery. No ROS in it.
+ *
+ * ## State (filter_log.h, StateIndex)
+ * x = [E, N, c, psi, psi_dot, dE, dN]: camera centre (UTM), pixel-size correction, heading error of the attitude
+ * and its drift rate (gyro bias), dead-reckoning (DR) offset.
+ *
+ * ## Models (an extended Kalman filter)
+ * - Image motion m (metres, from toMetricMotion, covariance R_m) between the previous image's stamp a and the
+ *   current one b is the filter's prediction (the report's control input): over a part [u, v] of [a, b], with
+ *   f = (v - u) / (b - a) (constant velocity between two images):
+ *     p' = p + (1 + c) R(-psi) f m,   noise (1 + c)^2 R(-psi) (f R_m) R(-psi)^T + f image_step_noise_m^2 I
+ *                                       + position_noise_m2_per_s (v - u) I.
+ *   R(-psi) undoes the heading error: the attitude that turned the image motion into east/north has yaw + psi.
+ * - Heading: psi' = psi + psi_dot dt, psi_dot a random walk (integrated random walk, exact discretisation);
+ *   c a slow random walk.
+ * - Dead-reckoning offset: d' = d + dr_offset_noise (variance dr_offset_noise_m2_per_m per metre travelled
+ *   + dr_offset_noise_m2_per_s per second). When the DR and the camera attitude share their heading (the same gyro:
+ *   FilterConfig::dr_shares_heading), the DR's heading error moves the offset deterministically:
+ *     d' = d + (1 + c) (I - R(-psi)) f m,
+ *   so that the DR and the images, which see the same heading error, are not counted as independent evidence.
+ * - No image motion over an interval (registration failure, a gap in the images, dead reckoning or fixes ahead of
+ *   the image stream): p is kept with a large random walk (no_motion_position_noise_m2_per_s): the next DR update,
+ *   z_DR = p + d + v, then carries the position by the DR's increments (d is known from before), with the
+ *   covariance they deserve; without DR, the covariance just grows.
+ * - Dead reckoning (camera centre from the DR track): z = p + d + v, v ~ N(0, dr_measurement_sigma_m^2 I). The
+ *   first DR after initialize()/reset() (or after a DR recovery) initialises d = z - p exactly (no information on p).
+ *   The DR's reported covariance is checked but not used as measurement noise: it is the DR's absolute drift,
+ *   correlated over the whole dive, which the offset state models instead.
+ * - Absolute fix (USBL camera centre): z = p + v, v ~ N(0, covariance given).
+ *
+ * ## Time
+ * Events come in ARRIVAL order. The filter processes them in stamp order: it keeps a history (history_s) of its
+ * steps and events, and an event whose stamp is older than the latest processed stamp is inserted and the later
+ * events are processed again (rewind). So a USBL fix arriving 1.5 s late, or dead reckoning a little ahead of the
+ * image stream, gives exactly the result of in-order processing (the filter's result depends only on the set of
+ * events, not on their arrival order).
+ * - Fixes may come in any order: older than the history window (or the initialisation) -> kTooOld.
+ * - Image events and DR must each be in increasing stamp order within their own stream (they may interleave with
+ *   each other and with fixes); a stamp going back within its stream -> kInvalid. A stamp going back further than
+ *   the window, or jumping forward by more than max_prediction_gap_s, is a clock jump: kInvalid with a detail; the
+ *   caller should reset().
+ *
+ * ## Gating and recovery
+ * Fixes and DR are gated on their Mahalanobis distance (chi-square, 2 dof, gate_probability). After
+ * `recovery_rejections` consecutive rejected fixes the filter declares itself lost (e.g. after a long dropout in
+ * which its position drifted beyond its covariance) and re-anchors at the fix: p = z with the fix's covariance,
+ * heading, drift and pixel size kept, the DR offset re-initialised at the next DR (the step is marked as a
+ * discontinuity for the smoother). After `recovery_rejections` consecutive rejected DR positions (the DR track
+ * jumped, e.g. reset by the vehicle), the DR offset is re-initialised at that DR.
+ */
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "exocet_mosaic/fusion/filter_log.h"
+#include "exocet_mosaic/fusion/metric_motion.h"
+
+namespace exocet_mosaic {
+namespace fusion {
+
+struct FilterConfig {
+  // --- Image motion and position ---
+  /// Position random walk with image motion (m^2/s, >= 0): unmodelled motion errors per second.
+  double position_noise_m2_per_s = 1e-6;
+  /// Extra 1-sigma per image step (m, >= 0): errors of the flat-seabed conversion (relief, refraction).
+  double image_step_noise_m = 0.001;
+  /// Position random walk when no image motion covers an interval (m^2/s, > 0): the vehicle's motion is unknown
+  /// there (0.25 = 0.5 m/s of unknown speed over one second).
+  double no_motion_position_noise_m2_per_s = 0.25;
+  /// Assumed speed over ground (m/s, >= 0) for the DR offset's growth where no image motion measures the distance.
+  double no_motion_speed_mps = 0.5;
+
+  // --- Pixel-size correction c ---
+  double initial_pixel_size_correction_sigma = 0.02;  ///< 1-sigma at initialisation (relative, >= 0)
+  double pixel_size_correction_noise_per_sqrt_s = 1e-4;  ///< random walk (1/sqrt(s), >= 0)
+
+  // --- Heading error of the attitude ---
+  double initial_heading_sigma_rad = 0.02;        ///< 1-sigma at initialisation (rad, >= 0)
+  double initial_heading_drift_sigma_rps = 2e-4;  ///< 1-sigma of the gyro bias at initialisation (rad/s, >= 0)
+  double heading_noise_rad_per_sqrt_s = 1e-4;     ///< angle random walk (rad/sqrt(s), >= 0)
+  double heading_drift_noise_rps_per_sqrt_s = 2e-5;  ///< bias instability (rad/s/sqrt(s), >= 0)
+
+  // --- Dead reckoning ---
+  double dr_measurement_sigma_m = 0.01;      ///< white noise of one DR position, each axis (m, > 0)
+  double dr_offset_noise_m2_per_m = 1e-3;    ///< DR offset random walk per metre travelled (m^2/m, >= 0)
+  double dr_offset_noise_m2_per_s = 1e-6;    ///< DR offset random walk per second (m^2/s, >= 0)
+  /// The DR's heading comes from the same gyro as the attitude used for the images (the usual ROV set-up, and the
+  /// simulator's): its heading error moves the DR offset through psi (see the file comment).
+  bool dr_shares_heading = true;
+
+  // --- Gating ---
+  /// Probability of the chi-square (2 dof) gate on fixes and DR, in (0, 1): 0.999 -> Mahalanobis^2 <= 13.8.
+  double gate_probability = 0.999;
+  /// Consecutive rejections (>= 1) of one source (fixes, or DR) after which the filter recovers (see above).
+  int recovery_rejections = 5;
+
+  // --- Time ---
+  /// How long (s, > 0) the filter keeps its steps and events for out-of-sequence fixes (USBL latency + margin).
+  double history_s = 10.0;
+  /// Largest forward jump (s, > 0) between the latest processed stamp and a new event; larger is a clock jump.
+  double max_prediction_gap_s = 300.0;
+
+  /// "" or each problem, naming the field and its allowed range.
+  std::string validate() const;
+  /// Mahalanobis^2 threshold of the gate: the chi-square (2 dof) quantile -2 ln(1 - gate_probability).
+  double gateThreshold() const;
+};
+
+enum class UpdateStatus { kApplied, kRejectedByGate, kTooOld, kInvalid, kNotInitialized };
+/// "applied", "rejected_by_gate", "too_old", "invalid", "not_initialized".
+std::string toString(UpdateStatus status);
+
+struct UpdateResult {
+  UpdateStatus status = UpdateStatus::kInvalid;
+  double mahalanobis_sq = 0.0;  ///< of the innovation (fixes and DR; 0 for image events)
+  std::string detail;           ///< what happened: the distance against the gate, why invalid or too old
+};
+
+class NavigationFilter {
+ public:
+  /// @throws std::invalid_argument with validate()'s text.
+  explicit NavigationFilter(const FilterConfig& config);
+
+  const FilterConfig& config() const { return config_; }
+
+  /// Starts (or restarts) the filter at a camera position with its covariance (m^2), e.g. the operator's first
+  /// position or the first fix. Heading, drift and pixel size start at 0 with their configured sigmas.
+  /// @throws std::invalid_argument for a non-finite stamp or position, or a covariance not symmetric positive
+  ///         definite.
+  void initialize(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+  bool initialized() const { return initialized_; }
+  /// Forgets everything (clock jump, new dive): initialize() again before adding events.
+  void reset();
+
+  /// Image motion between the images stamped previous_stamp_s and stamp_s (see the file comment).
+  UpdateResult addImageMotion(double previous_stamp_s, double stamp_s, const MetricMotion& motion);
+  /// Registration failed for this pair: no image motion over [previous_stamp_s, stamp_s].
+  UpdateResult addImageFailure(double previous_stamp_s, double stamp_s);
+  /// Dead-reckoning camera centre (UTM) at stamp_s; its reported covariance (m^2) must be finite and positive
+  /// definite (it is not used as measurement noise, see the file comment).
+  UpdateResult addDeadReckoning(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+  /// Absolute fix (USBL) of the camera centre, stamped at measurement time (it may arrive late).
+  UpdateResult addAbsoluteFix(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+
+  /// At the latest stamp processed (default FilterState before initialisation).
+  FilterState current() const;
+  /// Extrapolated to a later stamp (no state change): with the velocity of the latest image motion when it ends
+  /// within one second of the latest stamp (its covariance scaled to the time), else kept in place with the
+  /// no-motion random walk. A stamp at or before the latest returns current().
+  FilterState predictedAt(double stamp_s) const;
+
+  /// The steps kept: every step since initialize() when the log is kept (default), otherwise only those within the
+  /// history window (what the out-of-sequence handling needs).
+  const FilterLog& log() const { return log_; }
+  void setKeepLog(bool keep);
+  bool keepLog() const { return keep_log_; }
+
+  /// Counters since initialize(), after re-processing (a fix first applied may be rejected on a rewind, and back).
+  struct Counters {
+    long image_motions = 0, image_failures = 0, rewinds = 0, steps_processed = 0, recoveries = 0;
+  };
+  const Counters& counters() const { return counters_; }
+
+ private:
+  enum class EventKind { kImage = 0, kDeadReckoning = 1, kFix = 2 };
+  struct Event {
+    EventKind kind = EventKind::kImage;
+    double stamp_s = 0.0;
+    double previous_stamp_s = 0.0;  ///< images: start of the interval
+    bool image_failed = false;      ///< images: registration failed (no motion over the interval)
+    Eigen::Vector2d value = Eigen::Vector2d::Zero();  ///< image displacement, DR or fix position (m)
+    Eigen::Matrix2d covariance = Eigen::Matrix2d::Zero();
+    uint64_t sequence = 0;  ///< arrival order, to order same-kind events at one stamp
+  };
+  struct Working {  ///< the filter's state while processing
+    double stamp_s = 0.0;
+    StateVector x;
+    StateMatrix P;
+    int consecutive_fix_rejections = 0;
+    int consecutive_dr_rejections = 0;
+    bool dr_initialized = false;
+  };
+
+  UpdateResult addImageEvent(const Event& event);
+  /// Inserts the event, re-processes every step from the first one it affects (steps after `affected_from_s`, or
+  /// at it when `inclusive`), and returns the event's own result.
+  UpdateResult insertAndProcess(Event* event, double affected_from_s, bool inclusive);
+  void processFrom(const Working& start, bool from_prior, uint64_t watched_sequence, UpdateResult* watched);
+  /// Prediction to `to_s` through the image motions (and gaps) that cover the interval.
+  void predict(Working* w, double to_s, StateMatrix* transition) const;
+  /// One linearised prediction over dt_s: with a fraction of an image motion (motion_m and motion_cov already
+  /// scaled by image_fraction), or with no motion information when motion_m is null.
+  void predictSegment(Working* w, double dt_s, double image_fraction, const Eigen::Vector2d* motion_m,
+                      const Eigen::Matrix2d* motion_cov, StateMatrix* transition) const;
+  UpdateResult applyUpdate(Working* w, const Event& event, FilterStep* step);
+  void prune();
+  std::string checkStamp(double stamp_s) const;
+  double latestStamp() const;
+  double windowStart() const { return latestStamp() - config_.history_s; }
+  Working workingFrom(const FilterStep& step, bool prior) const;
+
+  FilterConfig config_;
+  bool initialized_ = false;
+  bool keep_log_ = true;
+  FilterLog log_;
+  std::vector<Event> events_;  ///< within the history window, sorted by (stamp, kind, sequence)
+  uint64_t next_sequence_ = 0;
+  double initial_stamp_s_ = 0.0;
+  /// Stamp of the oldest state a rewind may restart from (-inf: the initial state itself, nothing pruned yet).
+  double rewind_floor_s_ = -std::numeric_limits<double>::infinity();
+  double last_image_stamp_s_ = 0.0, last_dr_stamp_s_ = 0.0;
+  bool have_image_ = false, have_dr_ = false;
+  Counters counters_;
+};
+
+}  // namespace fusion
+}  // namespace exocet_mosaic

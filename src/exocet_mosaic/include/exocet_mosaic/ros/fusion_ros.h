@@ -1,0 +1,164 @@
+/**
+ * @file fusion_ros.h
+ * @brief ROS wrapper of the navigation fusion: image motion (/mosaic/motion), dead reckoning, USBL fixes, attitude
+ * and altitude in; the fused camera position in UTM (nav_msgs/Odometry with covariance), tf, paths of the fused,
+ * navigation-only and image-only tracks, and /diagnostics out. The node and the nodelet are a few lines over this.
+ */
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <exocet_msgs/GeoDatum.h>
+#include <exocet_msgs/ImageMotion.h>
+#include <exocet_msgs/SetInitialPose.h>
+#include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Imu.h>
+#include <sensor_msgs/NavSatFix.h>
+#include <sensor_msgs/Range.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include "exocet_mosaic/fusion/measurement_history.h"
+#include "exocet_mosaic/fusion/metric_motion.h"
+#include "exocet_mosaic/fusion/navigation_filter.h"
+#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_mosaic/ros/fusion_parameters.h"
+
+namespace exocet_mosaic {
+
+/**
+ * @brief Fuses the registration's image motion with the vehicle's navigation (2D3 report, section 3.5).
+ *
+ * Inputs are processed in arrival order; USBL fixes, stamped at measurement and arriving late, are out-of-sequence
+ * measurements the filter handles from its history. Navigation in latitude/longitude (NavSatFix) or UTM
+ * (nav_msgs/Odometry in the `utm` frame) is accepted; the UTM zone is ~utm_zone's, /nav/datum's, or the first
+ * latitude/longitude's. With no navigation, the operator gives the first position, heading and height
+ * (~initial_* parameters or the ~set_initial_pose service) and the images carry the track on, its covariance growing.
+ *
+ * Bad input (NaN, out of range, a covariance that is not one, an unknown frame) is rejected, counted, logged
+ * (throttled) and shown on /diagnostics; a stamp going back further than ~clock_jump_s (a bag replayed again, a
+ * clock jump) resets the filter and the tracks. At shutdown the filtered and RTS-smoothed tracks are written to
+ * CSV when ~track_csv / ~smoothed_track_csv are set.
+ */
+class FusionRos {
+ public:
+  /// @throws std::invalid_argument for a bad parameter.
+  FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh);
+  ~FusionRos();
+
+ private:
+  // Inputs.
+  void onMotion(const exocet_msgs::ImageMotionConstPtr& msg);
+  void onOdometry(const nav_msgs::OdometryConstPtr& msg);
+  void onNavFix(const sensor_msgs::NavSatFixConstPtr& msg);
+  void onUsbl(const sensor_msgs::NavSatFixConstPtr& msg);
+  void onImu(const sensor_msgs::ImuConstPtr& msg);
+  void onAltitude(const sensor_msgs::RangeConstPtr& msg);
+  void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg);
+  void onDatum(const exocet_msgs::GeoDatumConstPtr& msg);
+  bool onSetInitialPose(exocet_msgs::SetInitialPose::Request& request, exocet_msgs::SetInitialPose::Response& response);
+  bool onSmooth(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+
+  /// Inputs reach the filter in stamp order: each is held until inputs ~reorder_delay_s newer have arrived (the
+  /// registration's motion arrives after navigation stamped later), or until the inputs stop. Fixes later than that
+  /// go to the filter as out-of-sequence measurements.
+  void enqueue(double stamp_s, std::function<void()> apply);
+  void release(bool everything);
+  void applyMotion(const exocet_msgs::ImageMotion& msg);
+
+  /// Dead reckoning of base_link (position in the UTM grid, attitude) from either input format.
+  void processDeadReckoning(const ros::Time& stamp, const Eigen::Vector3d& base_en_m,
+                            const std::optional<Eigen::Quaterniond>& world_from_base,
+                            const Eigen::Matrix2d& covariance_m2, const std::string& frame_id);
+  /// Checks a stamp for a clock jump (resetting everything when the time goes back) and keeps the newest stamp.
+  /// False if the message must be dropped.
+  bool admitStamp(const ros::Time& stamp, const std::string& what, bool late_allowed);
+  void resetAll(const std::string& why);
+  void rejectInput(const std::string& kind, const std::string& why);
+  void countResult(const std::string& kind, const fusion::UpdateResult& result);
+
+  /// Attitude (world from base_link) at a stamp: the IMU's, else the navigation's, else the operator heading carried
+  /// on by the images (level vehicle). Empty when none is known.
+  std::optional<Eigen::Quaterniond> attitudeAt(double stamp_s) const;
+  /// Camera height above the seabed at a stamp: the altimeter's (lever arms and attitude included), else the
+  /// operator's; empty when none is known.
+  std::optional<double> cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
+                                       const Eigen::Isometry3d& base_from_camera);
+  /// base_link -> frame from tf (static mounts); empty, with a throttled warning, when tf does not have it.
+  std::optional<Eigen::Isometry3d> mountOf(const std::string& frame);
+  /// The UTM grid of the dive, choosing it from a latitude/longitude when nothing fixed it yet.
+  const fusion::UtmGrid* gridFor(double latitude_deg, double longitude_deg);
+  void initializeFilter(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m, const std::string& source);
+  void initializeFromParameters();
+
+  // Outputs.
+  void publishState(const ros::Time& stamp);
+  void appendPath(nav_msgs::Path* path, const ros::Time& stamp, const Eigen::Vector2d& en_m);
+  void publishPaths();
+  void ensureMapOrigin(const Eigen::Vector2d& en_m);
+  void writeTracks();
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  ros::NodeHandle nh_, private_nh_;
+  FusionNodeConfig config_;
+  fusion::NavigationFilter filter_;
+
+  ros::Subscriber motion_sub_, odometry_sub_, nav_fix_sub_, usbl_sub_, imu_sub_, altitude_sub_, camera_info_sub_,
+      datum_sub_;
+  ros::ServiceServer initial_pose_srv_, smooth_srv_;
+  ros::Publisher odometry_pub_, fused_path_pub_, nav_path_pub_, image_path_pub_, smoothed_path_pub_;
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_;
+  tf2_ros::TransformBroadcaster tf_broadcaster_;
+  tf2_ros::StaticTransformBroadcaster static_broadcaster_;
+  diagnostic_updater::Updater updater_;
+  ros::SteadyTimer diagnostics_timer_, path_timer_;
+
+  // Geography.
+  std::optional<fusion::UtmGrid> grid_;
+  std::string grid_source_;
+  std::optional<Eigen::Vector2d> map_origin_en_m_;  ///< utm -> map offset (rviz cannot draw UTM-sized floats)
+
+  // Attitude, altitude and camera.
+  fusion::AttitudeHistory imu_attitude_, nav_attitude_;
+  fusion::ScalarHistory altimeter_range_m_;
+  std::string altimeter_frame_;
+  std::optional<Eigen::Matrix3d> camera_info_matrix_;
+  std::map<std::string, Eigen::Isometry3d> mounts_;
+  std::optional<double> operator_heading_rad_;  ///< ENU yaw carried by the images when no attitude sensor speaks
+  std::optional<double> operator_height_m_;
+  std::string camera_frame_;  ///< the motion messages' frame (the camera's optical frame)
+  std::optional<Eigen::Vector2d> pending_initial_en_m_;  ///< operator's first point, applied at the next input
+  double pending_initial_sigma_m_ = 1.0;
+  std::multimap<double, std::function<void()>> queue_;
+  ros::SteadyTime last_input_wall_;
+  ros::SteadyTimer flush_timer_;
+
+  // Tracks.
+  double newest_stamp_s_ = 0.0;
+  bool have_stamp_ = false;
+  std::optional<Eigen::Vector2d> image_only_en_m_;
+  std::optional<Eigen::Vector2d> last_dr_camera_en_m_;
+  nav_msgs::Path fused_path_, nav_path_, image_path_;
+  ros::Time last_odometry_stamp_;
+
+  // Counts for /diagnostics.
+  uint64_t motions_ = 0, motion_failures_ = 0, dead_reckonings_ = 0, fixes_ = 0, resets_ = 0;
+  std::map<std::string, uint64_t> applied_, gated_, too_old_, invalid_, rejected_inputs_;
+  std::string last_problem_;
+  ros::WallTime last_nav_wall_, last_motion_wall_;
+};
+
+}  // namespace exocet_mosaic

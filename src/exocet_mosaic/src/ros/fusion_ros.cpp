@@ -1,0 +1,793 @@
+#include "exocet_mosaic/ros/fusion_ros.h"
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+#include <stdexcept>
+
+#include <geometry_msgs/TransformStamped.h>
+
+#include "exocet_mosaic/fusion/image_heading.h"
+#include "exocet_mosaic/fusion/rts_smoother.h"
+#include "exocet_mosaic/registration/motion_model.h"
+#include "exocet_mosaic/sim/atomic_file.h"
+
+namespace exocet_mosaic {
+
+using diagnostic_msgs::DiagnosticStatus;
+namespace fu = fusion;
+
+namespace {
+
+bool finite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(); }
+
+/// A 2x2 covariance that is one: finite, symmetric enough, positive definite.
+bool validCovariance(const Eigen::Matrix2d& c) {
+  return c.allFinite() && c(0, 0) > 0.0 && c(1, 1) > 0.0 && c.determinant() > 0.0 &&
+         std::abs(c(0, 1) - c(1, 0)) <= 1e-6 * (c(0, 0) + c(1, 1));
+}
+
+Eigen::Quaterniond toEigen(const geometry_msgs::Quaternion& q) { return Eigen::Quaterniond(q.w, q.x, q.y, q.z); }
+
+/// A usable orientation: finite and of unit norm within 1% (a zero quaternion means "no orientation").
+bool validOrientation(const geometry_msgs::Quaternion& q) {
+  const Eigen::Quaterniond e = toEigen(q);
+  return e.coeffs().allFinite() && std::abs(e.norm() - 1.0) < 0.01;
+}
+
+/// ENU yaw (counter-clockwise from east) from a grid heading (clockwise from north).
+double enuYawFromHeading_rad(double heading_rad) { return M_PI / 2.0 - heading_rad; }
+
+Eigen::Quaterniond levelAttitude(double enu_yaw_rad) {
+  return Eigen::Quaterniond(Eigen::AngleAxisd(enu_yaw_rad, Eigen::Vector3d::UnitZ()));
+}
+
+}  // namespace
+
+FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
+    : nh_(nh),
+      private_nh_(private_nh),
+      config_(readFusionNodeConfig(private_nh)),
+      filter_(config_.filter),
+      tf_listener_(tf_buffer_),
+      imu_attitude_(30.0, config_.attitude_max_gap_s),
+      nav_attitude_(30.0, config_.attitude_max_gap_s),
+      altimeter_range_m_(30.0, config_.altitude_max_gap_s) {
+  filter_.setKeepLog(config_.keep_smoother_log);
+  if (config_.utm_zone > 0) {
+    grid_ = fu::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
+    grid_source_ = "parameter ~utm_zone";
+  }
+
+  auto subscribe = [this](ros::Subscriber* sub, const std::string& topic, int queue, auto callback) {
+    if (!topic.empty()) *sub = nh_.subscribe(topic, queue, callback, this);
+  };
+  subscribe(&motion_sub_, config_.motion_topic, 200, &FusionRos::onMotion);
+  subscribe(&odometry_sub_, config_.odometry_topic, 200, &FusionRos::onOdometry);
+  subscribe(&nav_fix_sub_, config_.nav_fix_topic, 200, &FusionRos::onNavFix);
+  subscribe(&usbl_sub_, config_.usbl_topic, 50, &FusionRos::onUsbl);
+  subscribe(&imu_sub_, config_.imu_topic, 500, &FusionRos::onImu);
+  subscribe(&altitude_sub_, config_.altitude_topic, 200, &FusionRos::onAltitude);
+  subscribe(&camera_info_sub_, config_.camera_info_topic, 5, &FusionRos::onCameraInfo);
+  subscribe(&datum_sub_, config_.datum_topic, 1, &FusionRos::onDatum);
+
+  odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.odometry_out_topic, 100);
+  fused_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.path_topic, 1, true);
+  nav_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.navigation_path_topic, 1, true);
+  image_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.image_path_topic, 1, true);
+  smoothed_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.smoothed_path_topic, 1, true);
+  initial_pose_srv_ = private_nh_.advertiseService("set_initial_pose", &FusionRos::onSetInitialPose, this);
+  smooth_srv_ = private_nh_.advertiseService("smooth", &FusionRos::onSmooth, this);
+  for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->header.frame_id = config_.map_frame;
+
+  updater_.setHardwareID("navigation fusion");
+  updater_.add("fusion", this, &FusionRos::diagnose);
+  // Wall-clock timers: /diagnostics and the paths go on when a replay pauses or its clock jumps back.
+  const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
+  diagnostics_timer_ =
+      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.update(); });
+  path_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0 / config_.path_rate_hz),
+                                      [this](const ros::SteadyTimerEvent&) { publishPaths(); });
+  last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
+  initializeFromParameters();
+  ROS_INFO("fusion: motion %s, dead reckoning %s, fixes %s, attitude %s, altitude %s; odometry on %s",
+           config_.motion_topic.c_str(),
+           (config_.odometry_topic.empty() ? config_.nav_fix_topic : config_.odometry_topic).c_str(),
+           config_.usbl_topic.c_str(), config_.imu_topic.c_str(), config_.altitude_topic.c_str(),
+           config_.odometry_out_topic.c_str());
+}
+
+FusionRos::~FusionRos() { writeTracks(); }
+
+// ---------------------------------------------------------------------------------------------------------------
+// Time, resets and bookkeeping.
+
+bool FusionRos::admitStamp(const ros::Time& stamp, const std::string& what, bool late_allowed) {
+  const double t = stamp.toSec();
+  if (!std::isfinite(t) || stamp.isZero()) {
+    rejectInput(what, "zero stamp");
+    return false;
+  }
+  if (have_stamp_ && t < newest_stamp_s_ - config_.clock_jump_s) {
+    std::ostringstream why;
+    why << what << " stamped " << std::fixed << std::setprecision(3) << newest_stamp_s_ - t
+        << " s before the newest input (more than ~clock_jump_s = " << config_.clock_jump_s
+        << " s): the clock jumped or the bag restarted";
+    resetAll(why.str());
+  }
+  (void)late_allowed;
+  if (!have_stamp_ || t > newest_stamp_s_) newest_stamp_s_ = t;
+  have_stamp_ = true;
+  return true;
+}
+
+void FusionRos::resetAll(const std::string& why) {
+  ++resets_;
+  last_problem_ = "reset: " + why;
+  ROS_WARN_THROTTLE(1.0, "fusion: resetting the filter and the tracks: %s", why.c_str());
+  filter_.reset();
+  imu_attitude_.clear();
+  nav_attitude_.clear();
+  altimeter_range_m_.clear();
+  image_only_en_m_.reset();
+  last_dr_camera_en_m_.reset();
+  have_stamp_ = false;
+  for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->poses.clear();
+  // The operator's first point stands for the dive (no navigation): take it again.
+  initializeFromParameters();
+}
+
+void FusionRos::rejectInput(const std::string& kind, const std::string& why) {
+  ++rejected_inputs_[kind];
+  last_problem_ = kind + " rejected: " + why;
+  ROS_ERROR_THROTTLE(2.0, "fusion: %s rejected: %s", kind.c_str(), why.c_str());
+}
+
+void FusionRos::countResult(const std::string& kind, const fu::UpdateResult& result) {
+  switch (result.status) {
+    case fu::UpdateStatus::kApplied: ++applied_[kind]; return;
+    case fu::UpdateStatus::kRejectedByGate:
+      ++gated_[kind];
+      last_problem_ = kind + " rejected by the gate: " + result.detail;
+      ROS_WARN_THROTTLE(2.0, "fusion: %s rejected by the Mahalanobis gate: %s", kind.c_str(), result.detail.c_str());
+      return;
+    case fu::UpdateStatus::kTooOld:
+      ++too_old_[kind];
+      last_problem_ = kind + " too old: " + result.detail;
+      ROS_WARN_THROTTLE(2.0, "fusion: %s too old for the filter's history: %s", kind.c_str(), result.detail.c_str());
+      return;
+    case fu::UpdateStatus::kInvalid:
+      ++invalid_[kind];
+      last_problem_ = kind + " invalid: " + result.detail;
+      ROS_ERROR_THROTTLE(2.0, "fusion: %s invalid: %s", kind.c_str(), result.detail.c_str());
+      return;
+    case fu::UpdateStatus::kNotInitialized:
+      ROS_INFO_THROTTLE(5.0, "fusion: %s waiting for a first position (navigation, ~initial_* or ~set_initial_pose)",
+                        kind.c_str());
+      return;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Geography, mounts, attitude and height.
+
+const fu::UtmGrid* FusionRos::gridFor(double latitude_deg, double longitude_deg) {
+  if (!grid_) {
+    grid_ = fu::UtmGrid::forLatLon(latitude_deg, longitude_deg);  // throws on a bad latitude/longitude
+    grid_source_ = "the first latitude/longitude";
+    ROS_INFO("fusion: UTM zone %s (EPSG %d) from %s", grid_->name().c_str(), grid_->epsg(), grid_source_.c_str());
+  }
+  return &*grid_;
+}
+
+std::optional<Eigen::Isometry3d> FusionRos::mountOf(const std::string& frame) {
+  const auto known = mounts_.find(frame);
+  if (known != mounts_.end()) return known->second;
+  try {
+    const geometry_msgs::TransformStamped t =
+        tf_buffer_.lookupTransform(config_.base_frame, frame, ros::Time(0), ros::Duration(0.0));
+    Eigen::Isometry3d base_from_frame = Eigen::Isometry3d::Identity();
+    base_from_frame.translation() =
+        Eigen::Vector3d(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
+    base_from_frame.linear() = toEigen(t.transform.rotation).normalized().toRotationMatrix();
+    if (!base_from_frame.matrix().allFinite()) throw tf2::TransformException("non-finite transform");
+    mounts_[frame] = base_from_frame;  // mounts are rigid: looked up once
+    return base_from_frame;
+  } catch (const tf2::TransformException& e) {
+    last_problem_ = "no transform " + config_.base_frame + " -> " + frame + ": " + e.what();
+    ROS_WARN_THROTTLE(5.0, "fusion: no transform %s -> %s yet (%s)", config_.base_frame.c_str(), frame.c_str(),
+                      e.what());
+    return std::nullopt;
+  }
+}
+
+std::optional<Eigen::Quaterniond> FusionRos::attitudeAt(double stamp_s) const {
+  if (auto q = imu_attitude_.at(stamp_s)) return q;
+  if (auto q = nav_attitude_.at(stamp_s)) return q;
+  return std::nullopt;
+}
+
+std::optional<double> FusionRos::cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
+                                                const Eigen::Isometry3d& base_from_camera) {
+  if (!altimeter_frame_.empty()) {
+    if (const auto range_m = altimeter_range_m_.at(stamp_s)) {
+      if (const auto altimeter = mountOf(altimeter_frame_)) {
+        const double height_m = fu::cameraHeightFromAltimeter_m(*range_m, world_from_base, altimeter->translation(),
+                                                                base_from_camera.translation());
+        if (std::isfinite(height_m) && height_m > 0.0) return height_m;
+      }
+    }
+  }
+  return operator_height_m_;
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Initialisation.
+
+void FusionRos::initializeFilter(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m,
+                                 const std::string& source) {
+  filter_.initialize(stamp_s, camera_en_m, Eigen::Matrix2d::Identity() * sigma_m * sigma_m);
+  image_only_en_m_ = camera_en_m;
+  ensureMapOrigin(camera_en_m);
+  ROS_INFO("fusion: initialised from %s at E %.2f N %.2f (1-sigma %.2f m)", source.c_str(), camera_en_m.x(),
+           camera_en_m.y(), sigma_m);
+}
+
+void FusionRos::initializeFromParameters() {
+  const FusionNodeConfig& c = config_;
+  if (std::isfinite(c.initial_heading_deg))
+    operator_heading_rad_ = enuYawFromHeading_rad(c.initial_heading_deg * M_PI / 180.0);
+  if (std::isfinite(c.initial_altitude_m)) operator_height_m_ = c.initial_altitude_m;
+  if (std::isfinite(c.initial_latitude_deg) && std::isfinite(c.initial_longitude_deg)) {
+    pending_initial_en_m_ =
+        gridFor(c.initial_latitude_deg, c.initial_longitude_deg)->toGrid(c.initial_latitude_deg, c.initial_longitude_deg);
+  } else if (std::isfinite(c.initial_easting_m) && std::isfinite(c.initial_northing_m)) {
+    pending_initial_en_m_ = Eigen::Vector2d(c.initial_easting_m, c.initial_northing_m);
+  }
+  pending_initial_sigma_m_ = c.initial_sigma_m;
+}
+
+bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
+                                 exocet_msgs::SetInitialPose::Response& response) {
+  std::ostringstream what;
+  try {
+    const bool latlon = std::isfinite(request.latitude_deg) && std::isfinite(request.longitude_deg);
+    const bool grid = std::isfinite(request.easting_m) && std::isfinite(request.northing_m);
+    if (latlon == grid)
+      throw std::invalid_argument("give either latitude_deg/longitude_deg or easting_m/northing_m (the other pair NaN)");
+    if (!(request.position_sigma_m > 0.0 && request.position_sigma_m <= 10000.0))
+      throw std::invalid_argument("position_sigma_m must be in (0, 10000] m");
+    if (std::isfinite(request.heading_deg) && !(request.heading_deg >= -360.0 && request.heading_deg <= 360.0))
+      throw std::invalid_argument("heading_deg must be in [-360, 360] or NaN");
+    if (!std::isnan(request.altitude_m) && !(request.altitude_m > 0.0 && request.altitude_m <= 1000.0))
+      throw std::invalid_argument("altitude_m must be in (0, 1000] m or NaN");
+    const Eigen::Vector2d en = latlon ? gridFor(request.latitude_deg, request.longitude_deg)
+                                            ->toGrid(request.latitude_deg, request.longitude_deg)
+                                      : Eigen::Vector2d(request.easting_m, request.northing_m);
+    if (std::isfinite(request.heading_deg)) operator_heading_rad_ = enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0);
+    if (std::isfinite(request.altitude_m)) operator_height_m_ = request.altitude_m;
+    pending_initial_en_m_ = en;
+    pending_initial_sigma_m_ = request.position_sigma_m;
+    if (filter_.initialized()) {
+      // Re-seeding during a dive: start again from the given point at the newest stamp.
+      filter_.reset();
+      initializeFilter(newest_stamp_s_, en, request.position_sigma_m, "~set_initial_pose");
+      pending_initial_en_m_.reset();
+    }
+    what << std::fixed << std::setprecision(2) << "position E " << en.x() << " N " << en.y() << " (1-sigma "
+         << request.position_sigma_m << " m)";
+    if (std::isfinite(request.heading_deg)) what << ", heading " << request.heading_deg << " deg";
+    if (std::isfinite(request.altitude_m)) what << ", camera height " << request.altitude_m << " m";
+    response.success = true;
+    response.message = "set " + what.str();
+    ROS_INFO("fusion: ~set_initial_pose: %s", response.message.c_str());
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.message = e.what();
+    ROS_ERROR("fusion: ~set_initial_pose refused: %s", e.what());
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Stamp ordering.
+
+void FusionRos::enqueue(double stamp_s, std::function<void()> apply) {
+  queue_.emplace(stamp_s, std::move(apply));
+  last_input_wall_ = ros::SteadyTime::now();
+  release(false);
+}
+
+void FusionRos::release(bool everything) {
+  while (!queue_.empty() && (everything || queue_.begin()->first <= newest_stamp_s_ - config_.reorder_delay_s)) {
+    auto apply = std::move(queue_.begin()->second);
+    queue_.erase(queue_.begin());
+    apply();
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Inputs.
+
+void FusionRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
+  if (!validOrientation(msg->orientation) || msg->orientation_covariance[0] < 0.0) {
+    rejectInput("imu", "no valid orientation (NaN, not a unit quaternion, or orientation_covariance[0] = -1)");
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "imu", false)) return;
+  imu_attitude_.add(msg->header.stamp.toSec(), toEigen(msg->orientation));
+}
+
+void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
+  const double r = msg->range;
+  if (!std::isfinite(r) || r <= 0.0 || r < msg->min_range || r > msg->max_range) {
+    std::ostringstream why;
+    why << "range " << r << " m outside (" << msg->min_range << ", " << msg->max_range << "] m or not finite";
+    rejectInput("altitude", why.str());
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "altitude", false)) return;
+  if (msg->header.frame_id.empty()) {
+    rejectInput("altitude", "empty frame_id: the altimeter's mount on the vehicle is unknown");
+    return;
+  }
+  altimeter_frame_ = msg->header.frame_id;
+  altimeter_range_m_.add(msg->header.stamp.toSec(), r);
+}
+
+void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+  Eigen::Matrix3d k;
+  for (int i = 0; i < 9; ++i) k(i / 3, i % 3) = msg->K[i];
+  if (!k.allFinite() || k(0, 0) <= 0.0 || k(1, 1) <= 0.0) {
+    rejectInput("camera_info", "K has a non-positive or non-finite focal length");
+    return;
+  }
+  camera_info_matrix_ = k;
+}
+
+void FusionRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
+  if (config_.utm_zone > 0) return;  // the parameter wins
+  try {
+    fu::UtmGrid grid = fu::UtmGrid::fromZone(msg->utm_zone, msg->northern_hemisphere);
+    if (!grid_ || grid_->zone() != grid.zone() || grid_->northern() != grid.northern()) {
+      if (grid_ && filter_.initialized())
+        ROS_WARN("fusion: /nav/datum gives zone %s, but %s was in use from %s: keeping it", grid.name().c_str(),
+                 grid_->name().c_str(), grid_source_.c_str());
+      else {
+        grid_ = grid;
+        grid_source_ = "the datum topic";
+        ROS_INFO("fusion: UTM zone %s (EPSG %d) from %s", grid_->name().c_str(), grid_->epsg(), grid_source_.c_str());
+      }
+    }
+  } catch (const std::invalid_argument& e) {
+    rejectInput("datum", e.what());
+  }
+}
+
+void FusionRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
+  const auto& p = msg->pose.pose.position;
+  if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
+    rejectInput("dead reckoning", "position is not finite");
+    return;
+  }
+  if (msg->header.frame_id != config_.utm_frame) {
+    rejectInput("dead reckoning", "frame '" + msg->header.frame_id + "', expected the UTM frame '" +
+                                      config_.utm_frame + "' (parameter ~utm_frame)");
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "dead reckoning", false)) return;
+  Eigen::Matrix2d covariance;
+  covariance << msg->pose.covariance[0], msg->pose.covariance[1], msg->pose.covariance[6], msg->pose.covariance[7];
+  if (covariance.isZero()) covariance = Eigen::Matrix2d::Identity() * std::pow(config_.dead_reckoning_sigma_m, 2);
+  std::optional<Eigen::Quaterniond> attitude;
+  if (validOrientation(msg->pose.pose.orientation)) attitude = toEigen(msg->pose.pose.orientation).normalized();
+  processDeadReckoning(msg->header.stamp, Eigen::Vector3d(p.x, p.y, p.z), attitude, covariance, msg->child_frame_id);
+}
+
+void FusionRos::onNavFix(const sensor_msgs::NavSatFixConstPtr& msg) {
+  if (!std::isfinite(msg->latitude) || !std::isfinite(msg->longitude) || std::abs(msg->latitude) > 90.0 ||
+      msg->longitude < -180.0 || msg->longitude >= 360.0) {
+    std::ostringstream why;
+    why << "latitude " << msg->latitude << " / longitude " << msg->longitude
+        << " outside [-90, 90] / [-180, 360) or not finite";
+    rejectInput("dead reckoning", why.str());
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "dead reckoning", false)) return;
+  const Eigen::Vector2d en = gridFor(msg->latitude, msg->longitude)->toGrid(msg->latitude, msg->longitude);
+  Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity() * std::pow(config_.dead_reckoning_sigma_m, 2);
+  if (msg->position_covariance_type != sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN)
+    covariance << msg->position_covariance[0], msg->position_covariance[1], msg->position_covariance[3],
+        msg->position_covariance[4];
+  processDeadReckoning(msg->header.stamp, Eigen::Vector3d(en.x(), en.y(), msg->altitude), std::nullopt, covariance,
+                       config_.base_frame);
+}
+
+void FusionRos::processDeadReckoning(const ros::Time& stamp, const Eigen::Vector3d& base_en_m,
+                                     const std::optional<Eigen::Quaterniond>& world_from_base,
+                                     const Eigen::Matrix2d& covariance_m2, const std::string& frame_id) {
+  if (!validCovariance(covariance_m2)) {
+    rejectInput("dead reckoning", "position covariance is not positive definite or not finite");
+    return;
+  }
+  (void)frame_id;
+  const double t = stamp.toSec();
+  if (world_from_base) nav_attitude_.add(t, *world_from_base);
+  last_nav_wall_ = ros::WallTime::now();
+  ++dead_reckonings_;
+  enqueue(t, [this, t, base_en_m, covariance_m2, stamp]() {
+    // The camera's position from base_link's: lever arm turned by the attitude when it is known.
+    Eigen::Vector2d camera_en = base_en_m.head<2>();
+    const auto attitude = attitudeAt(t);
+    const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
+    if (attitude && camera) camera_en = fu::cameraPosition(base_en_m, *attitude, *camera).head<2>();
+    appendPath(&nav_path_, stamp, camera_en);
+    last_dr_camera_en_m_ = camera_en;
+    if (!filter_.initialized()) {
+      if (pending_initial_en_m_) {
+        initializeFilter(t, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
+        pending_initial_en_m_.reset();
+      } else {
+        initializeFilter(t, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the dead reckoning");
+        return;
+      }
+    }
+    countResult("dead reckoning", filter_.addDeadReckoning(t, camera_en, covariance_m2));
+    // Without images the navigation carries the fused track: publish at its rate.
+    if ((ros::WallTime::now() - last_motion_wall_).toSec() > 1.0) publishState(stamp);
+  });
+}
+
+void FusionRos::onUsbl(const sensor_msgs::NavSatFixConstPtr& msg) {
+  ++fixes_;
+  if (msg->status.status < sensor_msgs::NavSatStatus::STATUS_FIX) {
+    rejectInput("fix", "status says no fix");
+    return;
+  }
+  if (!std::isfinite(msg->latitude) || !std::isfinite(msg->longitude) || std::abs(msg->latitude) > 90.0 ||
+      msg->longitude < -180.0 || msg->longitude >= 360.0) {
+    std::ostringstream why;
+    why << "latitude " << msg->latitude << " / longitude " << msg->longitude
+        << " outside [-90, 90] / [-180, 360) or not finite";
+    rejectInput("fix", why.str());
+    return;
+  }
+  Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity() * std::pow(config_.fix_sigma_m, 2);
+  if (msg->position_covariance_type != sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN)
+    covariance << msg->position_covariance[0], msg->position_covariance[1], msg->position_covariance[3],
+        msg->position_covariance[4];
+  if (!validCovariance(covariance)) {
+    rejectInput("fix", "position covariance is not positive definite or not finite");
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "fix", true)) return;
+  last_nav_wall_ = ros::WallTime::now();
+  const double t = msg->header.stamp.toSec();
+  const Eigen::Vector2d fix_en = gridFor(msg->latitude, msg->longitude)->toGrid(msg->latitude, msg->longitude);
+  const std::string frame = msg->header.frame_id;
+  enqueue(t, [this, t, fix_en, covariance, frame]() {
+    // The transponder is not the camera: move the fix by the lever arm between them.
+    Eigen::Vector2d camera_en = fix_en;
+    const auto attitude = attitudeAt(t);
+    const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
+    const auto transponder = frame.empty() || frame == config_.base_frame ? std::optional<Eigen::Isometry3d>(
+                                                                                Eigen::Isometry3d::Identity())
+                                                                          : mountOf(frame);
+    if (attitude && camera && transponder)
+      camera_en += (attitude->toRotationMatrix() * (camera->translation() - transponder->translation())).head<2>();
+    if (!filter_.initialized()) {
+      if (pending_initial_en_m_) {
+        initializeFilter(t, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
+        pending_initial_en_m_.reset();
+      } else if (config_.odometry_topic.empty() && config_.nav_fix_topic.empty()) {
+        initializeFilter(t, camera_en, std::sqrt(covariance.trace() / 2.0), "the first fix");
+        return;
+      } else {
+        return;  // the dead reckoning starts the filter
+      }
+    }
+    countResult("fix", filter_.addAbsoluteFix(t, camera_en, covariance));
+  });
+}
+
+void FusionRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
+  if (!admitStamp(msg->header.stamp, "image motion", false)) return;
+  if (msg->previous_stamp > msg->header.stamp || msg->previous_stamp.isZero()) {
+    rejectInput("image motion", "previous_stamp is zero or after the stamp");
+    return;
+  }
+  if (!msg->header.frame_id.empty()) camera_frame_ = msg->header.frame_id;
+  last_motion_wall_ = ros::WallTime::now();
+  ++motions_;
+  const exocet_msgs::ImageMotion copy = *msg;
+  enqueue(msg->header.stamp.toSec(), [this, copy]() { applyMotion(copy); });
+}
+
+void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
+  const double t0 = msg.previous_stamp.toSec(), t1 = msg.header.stamp.toSec();
+  if (!filter_.initialized()) {
+    if (!pending_initial_en_m_) {
+      countResult("image motion", {fu::UpdateStatus::kNotInitialized, 0.0, ""});
+      return;
+    }
+    initializeFilter(t0, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
+    pending_initial_en_m_.reset();
+  }
+  auto fail = [&](const std::string& kind, const std::string& why) {
+    if (!kind.empty()) rejectInput(kind, why);
+    ++motion_failures_;
+    countResult("image failure", filter_.addImageFailure(t0, t1));
+    publishState(msg.header.stamp);
+  };
+  if (msg.failed) {
+    fail("", "");
+    return;
+  }
+  registration::MotionModel model;
+  try {
+    model = registration::motionModelFromString(msg.model);
+  } catch (const std::invalid_argument& e) {
+    fail("image motion", e.what());
+    return;
+  }
+  const int n = registration::parameterCount(model);
+  if (static_cast<int>(msg.parameters.size()) != n || static_cast<int>(msg.covariance.size()) != n * n) {
+    fail("image motion", "parameters/covariance sizes do not match the model " + msg.model);
+    return;
+  }
+  const Eigen::VectorXd parameters = Eigen::Map<const Eigen::VectorXd>(msg.parameters.data(), n);
+  const Eigen::MatrixXd covariance = Eigen::Map<const Eigen::Matrix<double, -1, -1, Eigen::RowMajor>>(
+      msg.covariance.data(), n, n);
+  if (!finite(parameters) || !finite(covariance)) {
+    fail("image motion", "non-finite parameters or covariance");
+    return;
+  }
+  fu::CameraMount mount;
+  Eigen::Matrix3d k = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.camera_matrix.data());
+  if (!(k(0, 0) > 0.0 && k(1, 1) > 0.0 && k.allFinite())) {
+    if (!camera_info_matrix_) {
+      fail("image motion", "no camera matrix in the message and no camera_info received");
+      return;
+    }
+    k = *camera_info_matrix_;
+  }
+  mount.camera_matrix = k;
+  const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
+  if (!camera) {
+    fail("", "");
+    return;
+  }
+  mount.base_from_camera = *camera;
+
+  // Attitude at both stamps: the sensors', or the operator's heading carried on by the image rotation.
+  std::optional<Eigen::Quaterniond> q0 = attitudeAt(t0), q1 = attitudeAt(t1);
+  const Eigen::Matrix3d pixel_matrix = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
+  double yaw_change_rad = 0.0;
+  if ((!q0 || !q1) && operator_heading_rad_) {
+    yaw_change_rad = fu::yawChangeFromImageMotion_rad(pixel_matrix, k, mount.base_from_camera);
+    q0 = levelAttitude(*operator_heading_rad_);
+    q1 = levelAttitude(*operator_heading_rad_ + yaw_change_rad);
+  }
+  if (!q0 || !q1) {
+    last_problem_ = "no attitude at the image stamps (IMU, navigation orientation or ~initial_heading_deg)";
+    ROS_WARN_THROTTLE(5.0, "fusion: %s", last_problem_.c_str());
+    fail("", "");
+    return;
+  }
+  const auto h0 = cameraHeightAt(t0, *q0, mount.base_from_camera), h1 = cameraHeightAt(t1, *q1, mount.base_from_camera);
+  if (!h0 || !h1) {
+    last_problem_ = "no camera height at the image stamps (altimeter or ~initial_altitude_m)";
+    ROS_WARN_THROTTLE(5.0, "fusion: %s", last_problem_.c_str());
+    fail("", "");
+    return;
+  }
+  const Eigen::Vector2d centre(msg.centre_px[0], msg.centre_px[1]);
+  const fu::MetricMotion metric =
+      fu::toMetricMotion(model, parameters, covariance, centre, mount, {*q0, *h0}, {*q1, *h1});
+  if (!metric.valid) {
+    fail("image motion", metric.error);
+    return;
+  }
+  if (operator_heading_rad_ && yaw_change_rad != 0.0) *operator_heading_rad_ += yaw_change_rad;
+  const fu::UpdateResult result = filter_.addImageMotion(t0, t1, metric);
+  countResult("image motion", result);
+  if (image_only_en_m_) {
+    *image_only_en_m_ += metric.camera_displacement_en_m;
+    appendPath(&image_path_, msg.header.stamp, *image_only_en_m_);
+  }
+  publishState(msg.header.stamp);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Outputs.
+
+void FusionRos::ensureMapOrigin(const Eigen::Vector2d& en_m) {
+  if (map_origin_en_m_) return;
+  const double g = config_.map_origin_grid_m;
+  map_origin_en_m_ = Eigen::Vector2d(std::round(en_m.x() / g) * g, std::round(en_m.y() / g) * g);
+  if (!config_.publish_tf) return;
+  geometry_msgs::TransformStamped t;
+  t.header.stamp = ros::Time::now();
+  t.header.frame_id = config_.utm_frame;
+  t.child_frame_id = config_.map_frame;
+  t.transform.translation.x = map_origin_en_m_->x();
+  t.transform.translation.y = map_origin_en_m_->y();
+  t.transform.rotation.w = 1.0;
+  static_broadcaster_.sendTransform(t);
+}
+
+void FusionRos::appendPath(nav_msgs::Path* path, const ros::Time& stamp, const Eigen::Vector2d& en_m) {
+  ensureMapOrigin(en_m);
+  geometry_msgs::PoseStamped pose;
+  pose.header.stamp = stamp;
+  pose.header.frame_id = config_.map_frame;
+  pose.pose.position.x = en_m.x() - map_origin_en_m_->x();
+  pose.pose.position.y = en_m.y() - map_origin_en_m_->y();
+  pose.pose.orientation.w = 1.0;
+  path->poses.push_back(pose);
+  if (static_cast<int>(path->poses.size()) > config_.max_path_poses) {
+    // Bounded memory on a dive of any length: keep every other pose of the older half.
+    std::vector<geometry_msgs::PoseStamped> thinned;
+    thinned.reserve(path->poses.size());
+    const size_t half = path->poses.size() / 2;
+    for (size_t i = 0; i < path->poses.size(); ++i)
+      if (i >= half || i % 2 == 0) thinned.push_back(path->poses[i]);
+    path->poses.swap(thinned);
+  }
+}
+
+void FusionRos::publishState(const ros::Time& stamp) {
+  if (!filter_.initialized()) return;
+  const fu::FilterState s = filter_.current();
+  const auto attitude = attitudeAt(stamp.toSec());
+  const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
+
+  nav_msgs::Odometry odometry;
+  odometry.header.stamp = stamp;
+  odometry.header.frame_id = config_.utm_frame;
+  odometry.child_frame_id = config_.fused_camera_frame;
+  odometry.pose.pose.position.x = s.position_en_m.x();
+  odometry.pose.pose.position.y = s.position_en_m.y();
+  Eigen::Quaterniond world_from_camera = Eigen::Quaterniond::Identity();
+  if (attitude && camera) world_from_camera = *attitude * Eigen::Quaterniond(camera->linear());
+  odometry.pose.pose.orientation.w = world_from_camera.w();
+  odometry.pose.pose.orientation.x = world_from_camera.x();
+  odometry.pose.pose.orientation.y = world_from_camera.y();
+  odometry.pose.pose.orientation.z = world_from_camera.z();
+  auto& c = odometry.pose.covariance;
+  c[0] = s.position_covariance_m2(0, 0);
+  c[1] = s.position_covariance_m2(0, 1);
+  c[6] = s.position_covariance_m2(1, 0);
+  c[7] = s.position_covariance_m2(1, 1);
+  c[14] = 1e6;  // height is not estimated here
+  const double attitude_variance = (attitude && camera) ? 1e-4 : 1e6;
+  c[21] = c[28] = c[35] = attitude_variance;
+  odometry_pub_.publish(odometry);
+  appendPath(&fused_path_, stamp, s.position_en_m);
+
+  if (config_.publish_tf && map_origin_en_m_) {
+    geometry_msgs::TransformStamped t;
+    t.header = odometry.header;
+    t.header.frame_id = config_.map_frame;
+    t.child_frame_id = config_.fused_camera_frame;
+    t.transform.translation.x = s.position_en_m.x() - map_origin_en_m_->x();
+    t.transform.translation.y = s.position_en_m.y() - map_origin_en_m_->y();
+    t.transform.rotation = odometry.pose.pose.orientation;
+    tf_broadcaster_.sendTransform(t);
+  }
+}
+
+void FusionRos::publishPaths() {
+  // The inputs stopped (end of a bag, a pause): what waits for newer inputs goes to the filter now.
+  if (!queue_.empty() && (ros::SteadyTime::now() - last_input_wall_).toSec() > std::max(0.5, config_.reorder_delay_s))
+    release(true);
+  const ros::Time now = ros::Time::now();
+  for (auto [path, pub] : {std::make_pair(&fused_path_, &fused_path_pub_), std::make_pair(&nav_path_, &nav_path_pub_),
+                           std::make_pair(&image_path_, &image_path_pub_)}) {
+    if (path->poses.empty()) continue;
+    path->header.stamp = path->poses.back().header.stamp.isZero() ? now : path->poses.back().header.stamp;
+    pub->publish(*path);
+  }
+}
+
+bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+  release(true);
+  if (!config_.keep_smoother_log) {
+    response.success = false;
+    response.message = "~keep_smoother_log is false: the dive was not kept for smoothing";
+    return true;
+  }
+  const std::vector<fu::FilterState> smoothed = fu::smoothRts(filter_.log());
+  if (smoothed.empty()) {
+    response.success = false;
+    response.message = "nothing to smooth yet";
+    return true;
+  }
+  nav_msgs::Path path;
+  path.header.frame_id = config_.map_frame;
+  for (const fu::FilterState& s : smoothed) appendPath(&path, ros::Time(s.stamp_s), s.position_en_m);
+  path.header.stamp = path.poses.back().header.stamp;
+  smoothed_path_pub_.publish(path);
+  response.success = true;
+  response.message = "smoothed " + std::to_string(smoothed.size()) + " states";
+  return true;
+}
+
+namespace {
+std::string trackCsv(const std::vector<fu::FilterState>& states) {
+  std::ostringstream out;
+  out << "stamp_s,easting_m,northing_m,sigma_easting_m,sigma_northing_m,covariance_en_m2,pixel_size_correction,"
+         "pixel_size_correction_sigma\n";
+  out << std::fixed;
+  for (const fu::FilterState& s : states) {
+    out << std::setprecision(6) << s.stamp_s << ',' << std::setprecision(4) << s.position_en_m.x() << ','
+        << s.position_en_m.y() << ',' << std::sqrt(s.position_covariance_m2(0, 0)) << ','
+        << std::sqrt(s.position_covariance_m2(1, 1)) << ',' << std::setprecision(6) << s.position_covariance_m2(0, 1)
+        << ',' << s.pixel_size_correction << ',' << s.pixel_size_correction_sigma << '\n';
+  }
+  return out.str();
+}
+}  // namespace
+
+void FusionRos::writeTracks() {
+  release(true);
+  if (config_.track_csv.empty() && config_.smoothed_track_csv.empty()) return;
+  if (!config_.keep_smoother_log) {
+    ROS_ERROR("fusion: ~track_csv / ~smoothed_track_csv need ~keep_smoother_log: nothing written");
+    return;
+  }
+  try {
+    std::vector<fu::FilterState> filtered;
+    for (const fu::FilterStep& step : filter_.log().steps)
+      filtered.push_back(fu::FilterState::from(step.stamp_s, step.x_posterior, step.P_posterior));
+    if (!config_.track_csv.empty()) sim::writeFileAtomically(config_.track_csv, trackCsv(filtered));
+    if (!config_.smoothed_track_csv.empty())
+      sim::writeFileAtomically(config_.smoothed_track_csv, trackCsv(fu::smoothRts(filter_.log())));
+    ROS_INFO("fusion: wrote %zu states to %s %s", filtered.size(), config_.track_csv.c_str(),
+             config_.smoothed_track_csv.c_str());
+  } catch (const std::exception& e) {
+    ROS_ERROR("fusion: could not write the tracks: %s", e.what());
+  }
+}
+
+void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  auto total = [](const std::map<std::string, uint64_t>& m) {
+    uint64_t n = 0;
+    for (const auto& kv : m) n += kv.second;
+    return n;
+  };
+  status.add("initialised", filter_.initialized());
+  status.add("utm zone", grid_ ? grid_->name() + " (EPSG " + std::to_string(grid_->epsg()) + ") from " + grid_source_
+                               : std::string("unknown"));
+  status.add("image motions", motions_);
+  status.add("image motion failures", motion_failures_);
+  status.add("dead reckoning messages", dead_reckonings_);
+  status.add("fixes received", fixes_);
+  for (const auto& [name, counts] : {std::make_pair("applied", &applied_), std::make_pair("gated", &gated_),
+                                     std::make_pair("too old", &too_old_), std::make_pair("invalid", &invalid_),
+                                     std::make_pair("rejected inputs", &rejected_inputs_)})
+    for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
+  status.add("resets", resets_);
+  status.add("last problem", last_problem_);
+  if (!filter_.initialized()) {
+    status.summary(DiagnosticStatus::WARN, "waiting for a first position (navigation, ~initial_* or ~set_initial_pose)");
+    return;
+  }
+  const fu::FilterState s = filter_.current();
+  const double sigma_m = std::sqrt(std::max(s.position_covariance_m2(0, 0), s.position_covariance_m2(1, 1)));
+  status.add("position sigma (m)", sigma_m);
+  status.add("pixel size correction", s.pixel_size_correction);
+  status.add("pixel size correction sigma", s.pixel_size_correction_sigma);
+  const double nav_silence_s = (ros::WallTime::now() - last_nav_wall_).toSec();
+  const bool expects_navigation = !config_.odometry_topic.empty() || !config_.nav_fix_topic.empty();
+  if (sigma_m > config_.max_position_sigma_m)
+    status.summary(DiagnosticStatus::WARN, "position uncertain: 1-sigma " + std::to_string(sigma_m) + " m");
+  else if (expects_navigation && dead_reckonings_ > 0 && nav_silence_s > config_.max_navigation_silence_s)
+    status.summary(DiagnosticStatus::WARN, "no navigation for " + std::to_string(static_cast<int>(nav_silence_s)) + " s");
+  else if (total(rejected_inputs_) + total(invalid_) > 0 && !last_problem_.empty())
+    status.summary(DiagnosticStatus::OK, "fusing; some inputs rejected (see last problem)");
+  else
+    status.summary(DiagnosticStatus::OK, "fusing");
+}
+
+}  // namespace exocet_mosaic

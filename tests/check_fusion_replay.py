@@ -1,0 +1,134 @@
+#!/usr/bin/env python3
+"""Checks the registration + fusion chain on a replayed dive against ground truth (run by fusion_replay.test).
+
+The sample out-and-back dive (the 2D3 report's figure 5 experiment) is replayed with its camera, navigation (dead
+reckoning, late USBL fixes, IMU, altimeter) and tf; registration_node turns the images into motion and fusion_node
+fuses it with the navigation. The fused camera positions (/mosaic/odometry) are compared with the true camera
+centres (/ground_truth/camera_pose of the bag), beside the dead reckoning converted to the camera, and the RTS
+smoother's track (~smooth service) beside the filter's. Also checks the filter's consistency (NEES).
+"""
+import atexit
+import math
+import os
+import signal
+import subprocess
+import time
+import unittest
+
+import numpy as np
+import rosbag
+import rospy
+import rostest
+from nav_msgs.msg import Odometry, Path
+from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
+
+PKG = 'exocet_system_tests'
+
+
+def read_truth(path):
+    """True camera centre (E, N) by stamp (ns), and the image stamps."""
+    centres, images = {}, []
+    with rosbag.Bag(path) as bag:
+        for topic, msg, _ in bag.read_messages(topics=['/ground_truth/camera_pose', '/camera/image_raw/compressed']):
+            key = msg.header.stamp.to_nsec()
+            if topic == '/ground_truth/camera_pose':
+                centres[key] = np.array([msg.pose.position.x, msg.pose.position.y])
+            else:
+                images.append(key)
+    return centres, images
+
+
+def truth_at(centres_sorted, keys, t_ns):
+    """Camera centre at t by linear interpolation of the ground-truth poses."""
+    i = int(np.searchsorted(keys, t_ns))
+    if i < len(keys) and keys[i] == t_ns:
+        return centres_sorted[i]
+    if i == 0 or i >= len(keys):
+        return None
+    w = (t_ns - keys[i - 1]) / float(keys[i] - keys[i - 1])
+    return (1 - w) * centres_sorted[i - 1] + w * centres_sorted[i]
+
+
+class FusionReplayTest(unittest.TestCase):
+
+    def test_fused_track_against_ground_truth(self):
+        rospy.init_node('check_fusion_replay')
+        bag = rospy.get_param('~bag')
+        centres, images = read_truth(bag)
+        keys = np.array(sorted(centres))
+        centres_sorted = [centres[k] for k in keys]
+        odometry = []
+        rospy.Subscriber('/mosaic/odometry', Odometry, odometry.append, queue_size=1000)
+        smoothed = []
+        rospy.Subscriber('/mosaic/path_smoothed', Path, smoothed.append, queue_size=2)
+        navigation = []
+        rospy.Subscriber('/mosaic/path_navigation', Path, navigation.append, queue_size=2)
+        map_origin = []
+
+        def on_tf(msg):
+            for t in msg.transforms:
+                if t.header.frame_id == 'utm' and t.child_frame_id == 'map':
+                    map_origin.append(np.array([t.transform.translation.x, t.transform.translation.y]))
+        rospy.Subscriber('/tf_static', TFMessage, on_tf, queue_size=10)
+        time.sleep(1.0)
+        topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/nav/odometry', '/nav/usbl', '/nav/imu',
+                  '/nav/altitude', '/nav/datum', '/tf_static']
+        player = subprocess.Popen(['rosbag', 'play', '--clock', '-q', '-r', str(rospy.get_param('~rate')),
+                                   '--queue=1000', '--wait-for-subscribers', bag, '--topics'] + topics,
+                                  start_new_session=True)
+        # Never leave a player behind: it would reconnect to the next test's master (same port) and replay there.
+        atexit.register(lambda: player.poll() is None and os.killpg(player.pid, signal.SIGKILL))
+        last_count, last_change = -1, time.time()
+        while time.time() - last_change < 20.0:
+            if len(odometry) != last_count:
+                last_count, last_change = len(odometry), time.time()
+            if player.poll() is not None and time.time() - last_change > 3.0:
+                break
+            time.sleep(0.2)
+        rospy.wait_for_service('/fusion/smooth', timeout=10.0)
+        reply = rospy.ServiceProxy('/fusion/smooth', Trigger)()
+        self.assertTrue(reply.success, reply.message)
+        deadline = time.time() + 5.0
+        while time.time() < deadline and not smoothed:
+            time.sleep(0.1)
+        self.assertTrue(smoothed, 'the smoothed path is published')
+
+        # One fused position per image pair (image stamps), each against the truth.
+        self.assertGreaterEqual(len(odometry), 0.95 * (len(images) - 1))
+        errors, nees = [], []
+        for o in odometry:
+            truth = truth_at(centres_sorted, keys, o.header.stamp.to_nsec())
+            if truth is None:
+                continue
+            err = np.array([o.pose.pose.position.x, o.pose.pose.position.y]) - truth
+            cov = np.array([[o.pose.covariance[0], o.pose.covariance[1]], [o.pose.covariance[6], o.pose.covariance[7]]])
+            self.assertTrue(np.all(np.isfinite(cov)) and np.linalg.det(cov) > 0.0)
+            errors.append(float(np.linalg.norm(err)))
+            nees.append(float(err @ np.linalg.solve(cov, err)))
+        self.assertTrue(map_origin, 'utm -> map is published on /tf_static')
+        origin = map_origin[-1]
+
+        def path_rmse(path):
+            e = []
+            for p in path.poses:
+                truth = truth_at(centres_sorted, keys, p.header.stamp.to_nsec())
+                if truth is not None:
+                    e.append(np.linalg.norm(np.array([p.pose.position.x, p.pose.position.y]) + origin - truth))
+            return math.sqrt(np.mean(np.square(e))), len(e)
+        smoothed_rmse, smoothed_count = path_rmse(smoothed[-1])
+        nav_rmse, _ = path_rmse(navigation[-1])
+        rmse = math.sqrt(np.mean(np.square(errors)))
+        mean_nees = float(np.mean(nees))
+        in_bounds = float(np.mean([(0.0506 <= v <= 7.38) for v in nees]))
+        print('fusion replay: %d fused positions, RMSE %.3f m (max %.3f m), smoothed %.3f m (%d states), dead '
+              'reckoning %.3f m; mean NEES %.2f (2 expected), %.0f%% within the 95%% bounds'
+              % (len(errors), rmse, max(errors), smoothed_rmse, smoothed_count, nav_rmse, mean_nees, 100 * in_bounds))
+        self.assertLess(rmse, 0.3)
+        self.assertLessEqual(smoothed_rmse, rmse, 'the smoother uses the future: it does no worse than the filter')
+        self.assertGreater(in_bounds, 0.8)
+        self.assertTrue(0.5 < mean_nees < 6.0, 'the covariance tells the size of the error')
+
+
+if __name__ == '__main__':
+    rostest.rosrun(PKG, 'fusion_replay', FusionReplayTest)
