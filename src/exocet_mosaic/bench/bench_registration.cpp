@@ -7,12 +7,16 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <time.h>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/features2d.hpp>
@@ -20,6 +24,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video.hpp>
 
+#include "exocet_mosaic/registration/normalizing_registrar.h"
 #include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/sequence_evaluation.h"
 #include "exocet_mosaic/registration/sift_reference.h"
@@ -120,21 +125,84 @@ RegistrationConfig configFor(RegistrationMethod method, MotionModel model) {
   return c;
 }
 
-/// Frames per second of registerNext over `frames`, repeated until at least `min_seconds` have passed.
-double speed(RegistrationMethod method, MotionModel model, const std::vector<cv::Mat>& frames, double min_seconds) {
+/// Per-thread CPU time: the machine is shared, so wall-clock rates are noisy; this one counts our own work only.
+double threadCpuSeconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+struct Speed {
+  double wall_fps = 0.0;
+  double cpu_fps = 0.0;  ///< frames per second of this thread's CPU time
+  int frames = 0;
+  // KLT only: mean wall-clock milliseconds per frame in each stage (KltDiagnostics); `other` is the rest of
+  // registerNext (illumination normaliser, input checks).
+  bool has_stages = false;
+  double pyramid_ms = 0.0, track_ms = 0.0, detect_ms = 0.0, fit_ms = 0.0, other_ms = 0.0;
+  double detections_per_frame = 0.0, features_per_frame = 0.0;
+};
+
+/// Rate of registerNext over `frames` (the previous motion as prediction, as registration_node does), the clip
+/// repeated until at least `min_seconds` of wall time have passed.
+Speed speed(RegistrationMethod method, MotionModel model, const std::vector<cv::Mat>& frames, double min_seconds) {
   std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(method, model));
-  int count = 0;
+  FrameRegistrar* inner = r.get();
+  if (auto* normalizing = dynamic_cast<NormalizingRegistrar*>(r.get())) inner = &normalizing->inner();
+  const auto* klt = dynamic_cast<const KltRegistrar*>(inner);
+  Speed s;
+  s.has_stages = klt != nullptr;
+  double total_ms = 0.0, stages_ms = 0.0;
+  int detections = 0, features = 0;
   const auto start = Clock::now();
+  const double cpu_start = threadCpuSeconds();
   Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
   do {
     r->reset();
     for (const cv::Mat& f : frames) {
       const MotionEstimate e = r->registerNext(f, prediction);
       prediction = e.failed ? Eigen::Matrix3d::Identity() : e.pixel_matrix;
-      ++count;
+      ++s.frames;
+      if (klt) {
+        const KltDiagnostics& d = klt->lastDiagnostics();
+        s.pyramid_ms += d.pyramid_ms;
+        s.track_ms += d.track_ms;
+        s.detect_ms += d.detect_ms;
+        s.fit_ms += d.fit_ms;
+        stages_ms += d.pyramid_ms + d.track_ms + d.detect_ms + d.fit_ms;
+        total_ms += e.elapsed_ms;
+        detections += d.detected > 0;
+        features += d.features;
+      }
     }
   } while (msSince(start) < 1000.0 * min_seconds);
-  return 1000.0 * count / msSince(start);
+  const double cpu_s = threadCpuSeconds() - cpu_start;
+  s.wall_fps = 1000.0 * s.frames / msSince(start);
+  s.cpu_fps = cpu_s > 0.0 ? s.frames / cpu_s : 0.0;
+  if (klt) {
+    const double n = s.frames;
+    s.pyramid_ms /= n;
+    s.track_ms /= n;
+    s.detect_ms /= n;
+    s.fit_ms /= n;
+    s.other_ms = (total_ms - stages_ms) / n;
+    s.detections_per_frame = detections / n;
+    s.features_per_frame = features / n;
+  }
+  return s;
+}
+
+void printSpeed(const std::string& name, const Speed& s) {
+  std::ostringstream line;  // its own stream, so that std::cout's number format stays as it was
+  line << std::fixed << std::setprecision(1) << "speed " << std::left << std::setw(20) << name << std::right
+       << std::setw(7) << s.wall_fps << " frames/s wall, " << std::setw(7) << s.cpu_fps << " per CPU second ("
+       << s.frames << " frames)";
+  if (s.has_stages)
+    line << std::setprecision(3) << "; ms/frame: pyramid " << s.pyramid_ms << ", track " << s.track_ms << ", detect "
+         << s.detect_ms << ", fit " << s.fit_ms << ", normaliser and rest " << s.other_ms << std::setprecision(2)
+         << "; detections/frame " << s.detections_per_frame << ", features/frame " << std::setprecision(0)
+         << s.features_per_frame;
+  std::cout << line.str() << "\n";
 }
 
 template <typename Peer>
@@ -192,38 +260,82 @@ struct Json {
 
 void printRow(const std::string& name, const SequenceScore& s, double fps, double ratio_ecc, double ratio_features) {
   std::cout << std::left << std::setw(30) << name << std::right << std::fixed << std::setprecision(3) << std::setw(9)
-            << s.median_px << std::setw(9) << s.p95_px << std::setprecision(2) << std::setw(9)
-            << 100.0 * s.failure_rate << std::setw(9) << 100.0 * s.gross_failure_rate << std::setprecision(0)
-            << std::setw(9) << fps;
+            << s.median_px << std::setw(9) << s.p95_px << std::setprecision(2) << std::setw(9) << 100.0 * s.failure_rate
+            << std::setw(9) << 100.0 * s.gross_failure_rate << std::setprecision(0) << std::setw(9) << fps;
   if (ratio_ecc > 0) std::cout << std::setprecision(1) << std::setw(9) << ratio_ecc << std::setw(9) << ratio_features;
   std::cout << "\n";
 }
+
+/// Splits "a,b,c".
+std::set<std::string> splitList(const std::string& text) {
+  std::set<std::string> items;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ','))
+    if (!item.empty()) items.insert(item);
+  return items;
+}
+
+/// Score of the pairs of `all` that `select` keeps (the registrar already ran over the whole sequence).
+SequenceScore subset(const SequenceScore& all, const std::function<bool(int)>& select) {
+  std::vector<PairScore> pairs;
+  for (const PairScore& p : all.pairs)
+    if (select(p.index)) pairs.push_back(p);
+  return summarize(pairs);
+}
+
+const char* kUsage =
+    "usage: bench_registration [--output-dir DIR] [--shared-data DIR] [--frames N] [--only PARTS] [--methods KEYS]\n"
+    "  --only PARTS   comma-separated subset of accuracy (simulated dive and Sparus), peers (OpenCV ECC and ORB),\n"
+    "                 speed (ours, one thread, PAL and HD); default all. Keys not measured keep their value in\n"
+    "                 DIR/registration.json.\n"
+    "  --methods KEYS comma-separated subset of klt, rmr, auto, klt_similarity, rmr_similarity, klt_affine,\n"
+    "                 rmr_affine (accuracy), and of klt, rmr, auto (speed); default all.\n";
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string out_dir = "out/bench", shared = "../shared/data", config_dir = EXOCET_CONFIG_DIR;
   int frames_limit = 0;
-  for (int i = 1; i + 1 < argc; i += 2) {
+  std::set<std::string> parts = {"accuracy", "peers", "speed"}, methods;
+  for (int i = 1; i < argc; i += 2) {
     const std::string a = argv[i];
-    if (a == "--output-dir") out_dir = argv[i + 1];
-    else if (a == "--shared-data") shared = argv[i + 1];
-    else if (a == "--frames") frames_limit = std::stoi(argv[i + 1]);
+    if (i + 1 >= argc) {
+      std::cerr << "bench_registration: " << a << " needs a value\n" << kUsage;
+      return 2;
+    }
+    if (a == "--output-dir")
+      out_dir = argv[i + 1];
+    else if (a == "--shared-data")
+      shared = argv[i + 1];
+    else if (a == "--frames")
+      frames_limit = std::stoi(argv[i + 1]);
+    else if (a == "--only")
+      parts = splitList(argv[i + 1]);
+    else if (a == "--methods")
+      methods = splitList(argv[i + 1]);
     else {
-      std::cerr << "usage: bench_registration [--output-dir DIR] [--shared-data DIR] [--frames N]\n";
+      std::cerr << kUsage;
       return 2;
     }
   }
+  for (const std::string& part : parts)
+    if (part != "accuracy" && part != "peers" && part != "speed") {
+      std::cerr << "bench_registration: unknown part '" << part << "' in --only\n" << kUsage;
+      return 2;
+    }
+  const bool accuracy = parts.count("accuracy"), peers = parts.count("peers"), timing = parts.count("speed");
+  auto wanted = [&methods](const std::string& key) { return methods.empty() || methods.count(key) > 0; };
   cv::setNumThreads(1);
   std::cout << std::unitbuf;  // progress lines appear as they happen, also when redirected to a file
+  std::filesystem::create_directories(out_dir);
   Json json;
   json.merge(out_dir + "/registration.json");
 
   // ---- 1. Accuracy on the simulated dive ----
   std::vector<std::string> overrides;
   if (frames_limit > 0) overrides.push_back("duration_s=" + std::to_string(frames_limit / 25.0 - 0.01));
-  const sim::DiveDescription dive =
-      sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml", overrides);
+  const sim::DiveDescription dive = sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml", overrides);
   auto t0 = Clock::now();
   const sim::RenderedDive pal = sim::renderDiveCached(dive, 2, out_dir + "/cache");
   std::cout << "rendered " << pal.gray.size() << " PAL frames in " << msSince(t0) / 1000.0 << " s\n";
@@ -246,135 +358,170 @@ int main(int argc, char** argv) {
       {"rmr_affine", RegistrationMethod::kRmr, MotionModel::kAffine},
   };
   std::map<std::string, SequenceScore> scores;
-  for (const Candidate& c : candidates) {
-    std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(c.method, c.model));
-    scores[c.key] = evaluateSequence(*r, pal.gray, truth);
-    const auto dark = [&](int i) { return pal.light_gain[i] < 1.0; };
-    const auto turbid = [&](int i) { return pal.turbidity[i] > 1.0; };
-    const SequenceScore s_dark = evaluateSequence(*r, pal.gray, truth, 2.0, dark);
-    const SequenceScore s_turbid = evaluateSequence(*r, pal.gray, truth, 2.0, turbid);
-    json.set(c.key + "_median_px", scores[c.key].median_px);
-    json.set(c.key + "_p95_px", scores[c.key].p95_px);
-    json.set(c.key + "_failure_rate", scores[c.key].failure_rate);
-    json.set(c.key + "_gross_failure_rate", scores[c.key].gross_failure_rate);
-    json.set(c.key + "_nees_ratio", scores[c.key].nees_ratio);
-    json.set(c.key + "_dark_median_px", s_dark.median_px);
-    json.set(c.key + "_turbid_median_px", s_turbid.median_px);
-    std::cout << c.key << ": median " << scores[c.key].median_px << " px, p95 " << scores[c.key].p95_px
-              << " px, max " << scores[c.key].max_px << ", failed " << scores[c.key].failures << ", gross "
-              << scores[c.key].gross_failures << ", NEES ratio " << scores[c.key].nees_ratio << "; dark median "
-              << s_dark.median_px << " (" << s_dark.failures << " failed), turbid median " << s_turbid.median_px
-              << " (" << s_turbid.failures << " failed)\n";
+  if (accuracy) {
+    for (const Candidate& c : candidates) {
+      if (!wanted(c.key)) continue;
+      std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(c.method, c.model));
+      t0 = Clock::now();
+      const SequenceScore& s = scores[c.key] = evaluateSequence(*r, pal.gray, truth);
+      const double run_s = msSince(t0) / 1000.0;
+      // The segments are scored on the same run: the registrar's state is that of the whole dive.
+      const SequenceScore s_dark = subset(s, [&](int i) { return pal.light_gain[i] < 1.0; });
+      const SequenceScore s_turbid = subset(s, [&](int i) { return pal.turbidity[i] > 1.0; });
+      json.set(c.key + "_median_px", s.median_px);
+      json.set(c.key + "_p95_px", s.p95_px);
+      json.set(c.key + "_failure_rate", s.failure_rate);
+      json.set(c.key + "_gross_failure_rate", s.gross_failure_rate);
+      json.set(c.key + "_nees_ratio", s.nees_ratio);
+      json.set(c.key + "_dark_median_px", s_dark.median_px);
+      json.set(c.key + "_turbid_median_px", s_turbid.median_px);
+      std::cout << c.key << ": median " << s.median_px << " px, p95 " << s.p95_px << " px, max " << s.max_px
+                << ", failed " << s.failures << ", gross " << s.gross_failures << ", NEES ratio " << s.nees_ratio
+                << "; dark median " << s_dark.median_px << " (" << s_dark.failures << " failed), turbid median "
+                << s_turbid.median_px << " (" << s_turbid.failures << " failed); " << run_s << " s\n";
+    }
+    json.set("dive_pairs", double(pal.gray.size() - 1));
+    if (scores.count("klt") && scores.count("rmr"))
+      json.set("gross_failure_rate", std::max(scores["klt"].gross_failure_rate, scores["rmr"].gross_failure_rate));
+    if (scores.count("auto")) json.set("auto_gross_failure_rate", scores["auto"].gross_failure_rate);
   }
-  json.set("dive_pairs", double(pal.gray.size() - 1));
-  json.set("gross_failure_rate", std::max(scores["klt"].gross_failure_rate, scores["rmr"].gross_failure_rate));
-  json.set("auto_gross_failure_rate", scores["auto"].gross_failure_rate);
 
   // Peers on every 5th pair (they are slow).
-  cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
-  const SequenceScore ecc = peerScore(pal.gray, truth, 5, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
-  const SequenceScore features =
-      peerScore(pal.gray, truth, 5, [&](const cv::Mat& a, const cv::Mat& b) { return orbPartialAffine(a, b, orb); });
-  json.set("ecc_median_px", ecc.median_px);
-  json.set("ecc_p95_px", ecc.p95_px);
-  json.set("ecc_failure_rate", ecc.failure_rate);
-  json.set("ecc_gross_failure_rate", ecc.gross_failure_rate);
-  json.set("features_median_px", features.median_px);
-  json.set("features_p95_px", features.p95_px);
-  json.set("features_failure_rate", features.failure_rate);
-  json.set("features_gross_failure_rate", features.gross_failure_rate);
+  SequenceScore ecc, features;
+  if (peers) {
+    cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
+    ecc = peerScore(pal.gray, truth, 5, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
+    features =
+        peerScore(pal.gray, truth, 5, [&](const cv::Mat& a, const cv::Mat& b) { return orbPartialAffine(a, b, orb); });
+    json.set("ecc_median_px", ecc.median_px);
+    json.set("ecc_p95_px", ecc.p95_px);
+    json.set("ecc_failure_rate", ecc.failure_rate);
+    json.set("ecc_gross_failure_rate", ecc.gross_failure_rate);
+    json.set("features_median_px", features.median_px);
+    json.set("features_p95_px", features.p95_px);
+    json.set("features_failure_rate", features.failure_rate);
+    json.set("features_gross_failure_rate", features.gross_failure_rate);
+    json.set("ecc_fps_pal", ecc.fps);
+    json.set("features_fps_pal", features.fps);
+    std::cout << "ECC affine: median " << ecc.median_px << " px, p95 " << ecc.p95_px << ", " << ecc.fps
+              << " pairs/s; ORB: median " << features.median_px << " px, p95 " << features.p95_px << ", "
+              << features.fps << " pairs/s\n";
+  }
 
-  // ---- 2. Speed, one thread ----
-  const std::vector<cv::Mat> pal_clip(pal.gray.begin(), pal.gray.begin() + std::min<size_t>(300, pal.gray.size()));
-  std::map<std::string, double> fps;
-  fps["klt"] = speed(RegistrationMethod::kKlt, MotionModel::kSimilarity, pal_clip, 3.0);
-  fps["rmr"] = speed(RegistrationMethod::kRmr, MotionModel::kSimilarity, pal_clip, 3.0);
-  fps["klt_homography"] = speed(RegistrationMethod::kKlt, MotionModel::kHomography, pal_clip, 2.0);
-  fps["rmr_homography"] = speed(RegistrationMethod::kRmr, MotionModel::kHomography, pal_clip, 2.0);
-  fps["auto"] = speed(RegistrationMethod::kAuto, MotionModel::kSimilarity, pal_clip, 2.0);
-  const double ecc_fps = ecc.fps, features_fps = features.fps;
-  json.set("klt_fps_pal", fps["klt"]);
-  json.set("rmr_fps_pal", fps["rmr"]);
-  json.set("klt_homography_fps_pal", fps["klt_homography"]);
-  json.set("rmr_homography_fps_pal", fps["rmr_homography"]);
-  json.set("auto_fps_pal", fps["auto"]);
-  json.set("ecc_fps_pal", ecc_fps);
-  json.set("features_fps_pal", features_fps);
+  // ---- 2. Speed, one thread: wall-clock and per-thread CPU rates ----
+  std::map<std::string, Speed> fps;
+  const sim::DiveDescription hd_dive =
+      sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml", {"camera.preset=hd", "duration_s=11.99"});
+  if (timing) {
+    // 300 frames (12 s) of the dive: long enough that tracking, not the first detection, sets the rate.
+    const std::vector<cv::Mat> pal_clip(pal.gray.begin(), pal.gray.begin() + std::min<size_t>(300, pal.gray.size()));
+    struct Timed {
+      std::string key;
+      RegistrationMethod method;
+      MotionModel model;
+      double seconds;
+    };
+    const std::vector<Timed> timed = {
+        {"klt", RegistrationMethod::kKlt, MotionModel::kSimilarity, 3.0},
+        {"rmr", RegistrationMethod::kRmr, MotionModel::kSimilarity, 3.0},
+        {"klt_homography", RegistrationMethod::kKlt, MotionModel::kHomography, 2.0},
+        {"rmr_homography", RegistrationMethod::kRmr, MotionModel::kHomography, 2.0},
+        {"auto", RegistrationMethod::kAuto, MotionModel::kSimilarity, 2.0},
+    };
+    for (const Timed& t : timed) {
+      if (!wanted(t.key.substr(0, t.key.find('_')))) continue;
+      fps[t.key] = speed(t.method, t.model, pal_clip, t.seconds);
+      json.set(t.key + "_fps_pal", fps[t.key].wall_fps);
+      json.set(t.key + "_fps_pal_cpu", fps[t.key].cpu_fps);
+      printSpeed(t.key + " PAL", fps[t.key]);
+    }
 
-  {
     t0 = Clock::now();
-    const sim::DiveDescription hd_dive = sim::loadDiveDescription(
-        config_dir + "/dives/bench_registration.yaml", {"camera.preset=hd", "duration_s=2.39"});
     const sim::RenderedDive hd = sim::renderDiveCached(hd_dive, 2, out_dir + "/cache");
     std::cout << "rendered " << hd.gray.size() << " HD frames in " << msSince(t0) / 1000.0 << " s\n";
-    json.set("klt_fps_hd", speed(RegistrationMethod::kKlt, MotionModel::kSimilarity, hd.gray, 3.0));
-    json.set("rmr_fps_hd", speed(RegistrationMethod::kRmr, MotionModel::kSimilarity, hd.gray, 3.0));
+    for (const Timed& t : timed) {
+      if (t.key == "auto" || !wanted(t.key.substr(0, t.key.find('_')))) continue;
+      const Speed s = speed(t.method, t.model, hd.gray, 3.0);
+      json.set(t.key + "_fps_hd", s.wall_fps);
+      json.set(t.key + "_fps_hd_cpu", s.cpu_fps);
+      printSpeed(t.key + " HD", s);
+    }
+  }
+  if (peers) {
+    const sim::RenderedDive hd = sim::renderDiveCached(hd_dive, 2, out_dir + "/cache");
     std::vector<Eigen::Matrix3d> hd_truth(hd.gray.size(), Eigen::Matrix3d::Identity());
     for (size_t i = 1; i < hd.gray.size(); ++i)
       hd_truth[i] = sim::seabedPlaneHomography(hd.camera, hd.local_from_camera[i - 1], hd.local_from_camera[i]);
+    // Every 50th pair of the HD clip: ECC runs about one pair per second there.
     const SequenceScore hd_ecc =
-        peerScore(hd.gray, hd_truth, 10, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
+        peerScore(hd.gray, hd_truth, 50, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
     json.set("ecc_fps_hd", hd_ecc.fps);
+    std::cout << "ECC affine HD: " << hd_ecc.fps << " pairs/s\n";
   }
 
   // ---- 3. Real seabed: Sparus AUV frames against SIFT + RANSAC ----
   // Undistorted with the dataset's intrinsics, as registration_node does with a camera_info.
-  const std::vector<cv::Mat> sparus = testing_data::loadSparusFrames(shared, true);
-  double sparus_max = 0.0;
-  if (sparus.size() >= 2) {
-    for (const std::string key : {"klt", "rmr"}) {
-      std::unique_ptr<FrameRegistrar> r = makeRegistrar(
-          configFor(key == "klt" ? RegistrationMethod::kKlt : RegistrationMethod::kRmr, MotionModel::kHomography));
-      std::vector<double> errors;
-      int failed = 0;
-      for (size_t i = 0; i < sparus.size(); ++i) {
-        const MotionEstimate e = r->registerNext(sparus[i]);
-        if (i == 0) continue;
-        const SiftReference reference = siftReferenceHomography(sparus[i - 1], sparus[i]);
-        if (!reference.found) continue;
-        if (e.failed) {
-          ++failed;
-          continue;
+  if (accuracy) {
+    const std::vector<cv::Mat> sparus = testing_data::loadSparusFrames(shared, true);
+    double sparus_max = 0.0;
+    if (sparus.size() >= 2) {
+      for (const std::string key : {"klt", "rmr"}) {
+        if (!wanted(key)) continue;
+        std::unique_ptr<FrameRegistrar> r = makeRegistrar(
+            configFor(key == "klt" ? RegistrationMethod::kKlt : RegistrationMethod::kRmr, MotionModel::kHomography));
+        std::vector<double> errors;
+        int failed = 0;
+        for (size_t i = 0; i < sparus.size(); ++i) {
+          const MotionEstimate e = r->registerNext(sparus[i]);
+          if (i == 0) continue;
+          const SiftReference reference = siftReferenceHomography(sparus[i - 1], sparus[i]);
+          if (!reference.found) continue;
+          if (e.failed) {
+            ++failed;
+            continue;
+          }
+          errors.push_back(
+              cornerTransferError_px(e.pixel_matrix, reference.pixel_matrix, sparus[i].cols, sparus[i].rows));
         }
-        errors.push_back(cornerTransferError_px(e.pixel_matrix, reference.pixel_matrix, sparus[i].cols, sparus[i].rows));
+        std::sort(errors.begin(), errors.end());
+        const double worst = errors.empty() ? std::nan("") : errors.back();
+        const double median = errors.empty() ? std::nan("") : errors[errors.size() / 2];
+        sparus_max = std::max(sparus_max, worst);
+        json.set("sparus_" + key + "_max_corner_px", worst);
+        json.set("sparus_" + key + "_median_corner_px", median);
+        json.set("sparus_" + key + "_failures", failed);
+        std::cout << "sparus " << key << ": " << errors.size() << " pairs, corner difference to SIFT+RANSAC median "
+                  << median << " px, max " << worst << " px, " << failed << " failed\n";
       }
-      std::sort(errors.begin(), errors.end());
-      const double worst = errors.empty() ? std::nan("") : errors.back();
-      const double median = errors.empty() ? std::nan("") : errors[errors.size() / 2];
-      sparus_max = std::max(sparus_max, worst);
-      json.set("sparus_" + key + "_max_corner_px", worst);
-      json.set("sparus_" + key + "_median_corner_px", median);
-      json.set("sparus_" + key + "_failures", failed);
-      std::cout << "sparus " << key << ": " << errors.size() << " pairs, corner difference to SIFT+RANSAC median "
-                << median << " px, max " << worst << " px, " << failed << " failed\n";
+      if (wanted("klt") && wanted("rmr")) json.set("sparus_max_corner_px", sparus_max);
+    } else {
+      std::cout << "sparus: no frames under " << shared << "/sparus_auv/frames\n";
     }
-    json.set("sparus_max_corner_px", sparus_max);
-  } else {
-    std::cout << "sparus: no frames under " << shared << "/sparus_auv/frames\n";
   }
 
-  // ---- Table ----
-  json.set("klt_median_px", scores["klt"].median_px);
-  json.set("klt_p95_px", scores["klt"].p95_px);
-  json.set("rmr_median_px", scores["rmr"].median_px);
-  json.set("rmr_p95_px", scores["rmr"].p95_px);
-  std::cout << "\nRegistration, simulated dive of " << pal.gray.size() << " PAL frames (turbid and dark stretches); "
-            << "speed on one thread, 720x576:\n"
-            << std::left << std::setw(30) << "method" << std::right << std::setw(9) << "med px" << std::setw(9)
-            << "p95 px" << std::setw(9) << "fail %" << std::setw(9) << "gross %" << std::setw(9) << "fps"
-            << std::setw(9) << "x ECC" << std::setw(9) << "x ORB" << "\n";
-  printRow("KLT homography", scores["klt"], fps["klt_homography"], fps["klt_homography"] / ecc_fps,
-           fps["klt_homography"] / features_fps);
-  printRow("RMR homography", scores["rmr"], fps["rmr_homography"], fps["rmr_homography"] / ecc_fps,
-           fps["rmr_homography"] / features_fps);
-  printRow("KLT similarity", scores["klt_similarity"], fps["klt"], fps["klt"] / ecc_fps, fps["klt"] / features_fps);
-  printRow("RMR similarity", scores["rmr_similarity"], fps["rmr"], fps["rmr"] / ecc_fps, fps["rmr"] / features_fps);
-  printRow("auto (KLT, then RMR) homog.", scores["auto"], fps["auto"], fps["auto"] / ecc_fps,
-           fps["auto"] / features_fps);
-  printRow("KLT affine", scores["klt_affine"], 0, 0, 0);
-  printRow("RMR affine", scores["rmr_affine"], 0, 0, 0);
-  printRow("OpenCV ECC affine pyramid", ecc, ecc_fps, 1.0, ecc_fps / features_fps);
-  printRow("ORB + estimateAffinePartial2D", features, features_fps, features_fps / ecc_fps, 1.0);
+  // ---- Table (of what this run measured) ----
+  if (accuracy && timing && peers && methods.empty()) {
+    const double ecc_fps = ecc.fps, features_fps = features.fps;
+    std::cout << "\nRegistration, simulated dive of " << pal.gray.size() << " PAL frames (turbid and dark stretches); "
+              << "speed on one thread, 720x576 (wall clock; per CPU second above):\n"
+              << std::left << std::setw(30) << "method" << std::right << std::setw(9) << "med px" << std::setw(9)
+              << "p95 px" << std::setw(9) << "fail %" << std::setw(9) << "gross %" << std::setw(9) << "fps"
+              << std::setw(9) << "x ECC" << std::setw(9) << "x ORB"
+              << "\n";
+    auto row = [&](const std::string& name, const std::string& score_key, const std::string& fps_key) {
+      const double f = fps[fps_key].wall_fps;
+      printRow(name, scores[score_key], f, f / ecc_fps, f / features_fps);
+    };
+    row("KLT homography", "klt", "klt_homography");
+    row("RMR homography", "rmr", "rmr_homography");
+    row("KLT similarity", "klt_similarity", "klt");
+    row("RMR similarity", "rmr_similarity", "rmr");
+    row("auto (KLT, then RMR) homog.", "auto", "auto");
+    printRow("KLT affine", scores["klt_affine"], 0, 0, 0);
+    printRow("RMR affine", scores["rmr_affine"], 0, 0, 0);
+    printRow("OpenCV ECC affine pyramid", ecc, ecc_fps, 1.0, ecc_fps / features_fps);
+    printRow("ORB + estimateAffinePartial2D", features, features_fps, features_fps / ecc_fps, 1.0);
+  }
 
   const std::string path = out_dir + "/registration.json";
   if (!json.write(path)) {

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include <Eigen/Dense>
+#include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
@@ -31,34 +32,94 @@ std::string sizeString(const cv::Size& size) { return std::to_string(size.width)
 
 // Scharr derivatives of a pyramid level over [x0, x1) x [y0, y1), exactly as cv::buildOpticalFlowPyramid computes
 // them: 3-10-3 smoothing across, central difference along, the image reflected at its border (reflect-101), pairs
-// (dI/dx, dI/dy) of int16. Two passes over small row buffers (vertical, then horizontal) so that both vectorise.
-void scharrDerivatives(const cv::Mat& image, int x0, int y0, int x1, int y1, std::vector<int16_t>* scratch,
-                       cv::Mat* derivatives) {
+// (dI/dx, dI/dy) of int16. Straight from the three rows, 8 columns at a time; the image's first and last columns
+// one by one.
+void scharrDerivatives(const cv::Mat& image, int x0, int y0, int x1, int y1, cv::Mat* derivatives) {
   const int rows = image.rows, cols = image.cols;
-  // Columns x0 - 1 ... x1 (reflected at the image border) of the vertical passes.
-  const int lo = x0 > 0 ? x0 - 1 : (cols > 1 ? 1 : 0), hi = x1 < cols ? x1 : (cols > 1 ? cols - 2 : 0);
-  const int span = x1 - x0 + 2;
-  scratch->resize(2 * span);
-  int16_t* smooth = scratch->data();  // smooth[i] is column x0 - 1 + i
-  int16_t* diff = smooth + span;
+  auto column = [cols](int x) { return x < 0 ? std::min(1, cols - 1) : (x >= cols ? std::max(cols - 2, 0) : x); };
+  const int inner0 = std::max(x0, 1), inner1 = std::min(x1, cols - 1);
   for (int y = y0; y < y1; ++y) {
     const uchar* r0 = image.ptr<uchar>(y > 0 ? y - 1 : (rows > 1 ? 1 : 0));
     const uchar* r1 = image.ptr<uchar>(y);
     const uchar* r2 = image.ptr<uchar>(y < rows - 1 ? y + 1 : (rows > 1 ? rows - 2 : 0));
-    for (int i = 1; i < span - 1; ++i) {
-      const int x = x0 - 1 + i;
-      smooth[i] = static_cast<int16_t>((r0[x] + r2[x]) * 3 + r1[x] * 10);
-      diff[i] = static_cast<int16_t>(r2[x] - r0[x]);
+    int16_t* d = derivatives->ptr<int16_t>(y);
+    auto one = [&](int x, int left, int right) {
+      d[2 * x] = static_cast<int16_t>((r0[right] + r2[right]) * 3 + r1[right] * 10 - (r0[left] + r2[left]) * 3 -
+                                      r1[left] * 10);
+      d[2 * x + 1] = static_cast<int16_t>(((r2[right] - r0[right]) + (r2[left] - r0[left])) * 3 + (r2[x] - r0[x]) * 10);
+    };
+    if (x0 == 0) one(0, column(-1), column(1));
+    int x = inner0;
+#if CV_SIMD128
+    // Wrapping (not saturating) arithmetic: every value fits 16 bits.
+    const cv::v_int16x8 three = cv::v_setall_s16(3), ten = cv::v_setall_s16(10);
+    auto load = [](const uchar* p) { return cv::v_reinterpret_as_s16(cv::v_load_expand(p)); };
+    for (; x < inner1; x += 8) {
+      // The last 8 columns of a span that is not a multiple of 8 overlap the previous ones (same values again).
+      if (x + 8 > inner1) {
+        if (inner1 - inner0 < 8) break;
+        x = inner1 - 8;
+      }
+      const cv::v_int16x8 left =
+          cv::v_mul_wrap(load(r0 + x - 1) + load(r2 + x - 1), three) + cv::v_mul_wrap(load(r1 + x - 1), ten);
+      const cv::v_int16x8 right =
+          cv::v_mul_wrap(load(r0 + x + 1) + load(r2 + x + 1), three) + cv::v_mul_wrap(load(r1 + x + 1), ten);
+      const cv::v_int16x8 outer =
+          cv::v_sub_wrap(load(r2 + x - 1), load(r0 + x - 1)) + cv::v_sub_wrap(load(r2 + x + 1), load(r0 + x + 1));
+      const cv::v_int16x8 dy =
+          cv::v_mul_wrap(outer, three) + cv::v_mul_wrap(cv::v_sub_wrap(load(r2 + x), load(r0 + x)), ten);
+      cv::v_store_interleave(d + 2 * x, cv::v_sub_wrap(right, left), dy);
     }
-    smooth[0] = static_cast<int16_t>((r0[lo] + r2[lo]) * 3 + r1[lo] * 10);
-    diff[0] = static_cast<int16_t>(r2[lo] - r0[lo]);
-    smooth[span - 1] = static_cast<int16_t>((r0[hi] + r2[hi]) * 3 + r1[hi] * 10);
-    diff[span - 1] = static_cast<int16_t>(r2[hi] - r0[hi]);
-    int16_t* d = derivatives->ptr<int16_t>(y) + 2 * x0;
-    for (int i = 1; i < span - 1; ++i) {
-      d[2 * (i - 1)] = static_cast<int16_t>(smooth[i + 1] - smooth[i - 1]);
-      d[2 * (i - 1) + 1] = static_cast<int16_t>((diff[i + 1] + diff[i - 1]) * 3 + diff[i] * 10);
+#endif
+    for (; x < inner1; ++x) one(x, x - 1, x + 1);
+    if (x1 == cols && cols > 1) one(cols - 1, column(cols - 2), column(cols));
+  }
+}
+
+// One pyramid level from the one below, whose image lies in `below` at (border_x, border_y) with a reflected border
+// of at least 2 pixels: the separable 4-tap binomial filter [1 3 3 1] / 8 at every other pixel, so that pixel x of
+// the result covers pixels 2x - 1 ... 2x + 2 below. Half the cost of pyrDown's 5-tap filter (which the library's
+// baseline build does not vectorise as well), smoother than a 2 x 2 mean: the coarse levels must still find large
+// motions between views that rotate. The half-pixel offset (centre 2x + 0.5 rather than 2x) is the same in both
+// images of a pair, so it does not bias the tracks.
+void downsample(const cv::Mat& below, int border_x, int border_y, cv::Mat* out) {
+  const int width = out->cols, height = out->rows;
+  // Rows of the level below filtered horizontally (h[x] covers columns 2x - 1 ... 2x + 2); the four that an output
+  // row needs, two of them kept for the next.
+  std::vector<uint16_t> rows(4 * size_t(width));
+  uint16_t* h[4] = {rows.data(), rows.data() + width, rows.data() + 2 * width, rows.data() + 3 * width};
+  auto filterRow = [&](int row, uint16_t* dst) {
+    const uchar* r = below.ptr<uchar>(border_y + row) + border_x;
+    int x = 0;
+#if CV_SIMD128
+    // Two neighbouring bytes per 16-bit lane: the low byte is column 2x - 1 (or 2x + 1), the high one 2x (2x + 2).
+    const cv::v_uint16x8 low_byte = cv::v_setall_u16(0xff), three = cv::v_setall_u16(3);
+    for (; x + 8 <= width; x += 8) {
+      const cv::v_uint16x8 p = cv::v_reinterpret_as_u16(cv::v_load(r + 2 * x - 1));
+      const cv::v_uint16x8 q = cv::v_reinterpret_as_u16(cv::v_load(r + 2 * x + 1));
+      cv::v_store(dst + x, (p & low_byte) + cv::v_shr<8>(q) + cv::v_mul_wrap(cv::v_shr<8>(p) + (q & low_byte), three));
     }
+#endif
+    for (; x < width; ++x) dst[x] = static_cast<uint16_t>(r[2 * x - 1] + r[2 * x + 2] + 3 * (r[2 * x] + r[2 * x + 1]));
+  };
+  filterRow(-1, h[2]);
+  filterRow(0, h[3]);
+  for (int y = 0; y < height; ++y) {
+    std::swap(h[0], h[2]);  // rows 2y - 1 and 2y were computed as the previous output row's last two
+    std::swap(h[1], h[3]);
+    filterRow(2 * y + 1, h[2]);
+    filterRow(2 * y + 2, h[3]);
+    uchar* o = out->ptr<uchar>(y);
+    int x = 0;
+#if CV_SIMD128
+    const cv::v_uint16x8 three = cv::v_setall_u16(3), half = cv::v_setall_u16(32);
+    for (; x + 8 <= width; x += 8) {
+      const cv::v_uint16x8 sum = cv::v_load(h[0] + x) + cv::v_load(h[3] + x) +
+                                 cv::v_mul_wrap(cv::v_load(h[1] + x) + cv::v_load(h[2] + x), three) + half;
+      cv::v_pack_store(o + x, cv::v_shr<6>(sum));
+    }
+#endif
+    for (; x < width; ++x) o[x] = static_cast<uchar>((h[0][x] + h[3][x] + 3 * (h[1][x] + h[2][x]) + 32) >> 6);
   }
 }
 
@@ -95,6 +156,11 @@ std::string KltConfig::validate() const {
   check(lk_max_iterations >= 1 && lk_max_iterations <= 100, "lk_max_iterations", "[1, 100]");
   check(lk_epsilon_px > 0.0 && lk_epsilon_px <= 1.0, "lk_epsilon_px", "(0, 1]");
   check(fb_threshold_px > 0.0 && fb_threshold_px <= 20.0, "fb_threshold_px", "(0, 20]");
+  check(fb_fine_start_px >= 0.0 && fb_fine_start_px <= 100.0, "fb_fine_start_px", "[0, 100]");
+  check(predicted_pyramid_levels >= 1 && predicted_pyramid_levels <= 8, "predicted_pyramid_levels", "[1, 8]");
+  check(retrack_fraction >= 0.0 && retrack_fraction <= 1.0, "retrack_fraction", "[0, 1]");
+  check(prediction_probes >= 0 && prediction_probes <= 1000, "prediction_probes", "[0, 1000]");
+  check(prediction_tolerance_px > 0.0 && prediction_tolerance_px <= 100.0, "prediction_tolerance_px", "(0, 100]");
   check(min_tracks >= minimal && min_tracks <= 5000, "min_tracks", minimal_range);
   check(min_inliers >= minimal && min_inliers <= 5000, "min_inliers", minimal_range);
   check(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0, "min_inlier_fraction", "[0, 1]");
@@ -147,31 +213,32 @@ MotionEstimate KltRegistrar::emptyEstimate(const cv::Size& size) const {
 void KltRegistrar::prepare(const cv::Mat& gray, Frame* frame) {
   const Clock::time_point start = Clock::now();
   frame->size = gray.size();
-  // No reuse of the caller's buffer (it may be overwritten before the next call); the pyramid's own buffers are
-  // reused from image to image.
-  if (!config_.derivatives_on_demand) {
-    frame->max_level = cv::buildOpticalFlowPyramid(gray, frame->pyramid, window_, config_.pyramid_levels - 1, true,
-                                                   cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
-  } else {
-    // The images only; the derivatives, which cost more than the images on every level, are filled in where
-    // Lucas-Kanade will read them. Their buffers keep a zero border, like cv::buildOpticalFlowPyramid's.
-    frame->max_level = cv::buildOpticalFlowPyramid(gray, frame->images, window_, config_.pyramid_levels - 1, false,
-                                                   cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
-    frame->derivative_buffers.resize(frame->max_level + 1);
-    frame->pyramid.resize(2 * (frame->max_level + 1));
-    for (int level = 0; level <= frame->max_level; ++level) {
-      const cv::Mat& image = frame->images[level];
-      cv::Mat& buffer = frame->derivative_buffers[level];
-      const cv::Size padded(image.cols + 2 * window_.width, image.rows + 2 * window_.height);
-      if (buffer.size() != padded || buffer.type() != CV_16SC2) {
-        buffer.create(padded, CV_16SC2);
-        buffer.setTo(cv::Scalar::all(0));
-      }
-      frame->pyramid[2 * level] = image;
-      frame->pyramid[2 * level + 1] = buffer(cv::Rect(window_.width, window_.height, image.cols, image.rows));
+  buildImagePyramid(gray, frame);
+  // The derivatives, which cost more than the images on every level, are filled in where Lucas-Kanade will read
+  // them (derivatives_on_demand), or here on whole levels. Their buffers keep a zero border, like
+  // cv::buildOpticalFlowPyramid's.
+  frame->derivative_buffers.resize(frame->max_level + 1);
+  frame->pyramid.resize(2 * (frame->max_level + 1));
+  for (int level = 0; level <= frame->max_level; ++level) {
+    const cv::Mat& image = frame->images[level];
+    cv::Mat& buffer = frame->derivative_buffers[level];
+    const cv::Size padded(image.cols + 2 * window_.width, image.rows + 2 * window_.height);
+    if (buffer.size() != padded || buffer.type() != CV_16SC2) {
+      buffer.create(padded, CV_16SC2);
+      buffer.setTo(cv::Scalar::all(0));
     }
-    frame->complete_levels = 0;
+    frame->pyramid[2 * level] = image;
+    frame->pyramid[2 * level + 1] = buffer(cv::Rect(window_.width, window_.height, image.cols, image.rows));
+    if (!config_.derivatives_on_demand) {
+      // OpenCV's Scharr filter, independent of ours (test DerivativesOnDemandMatchWholeLevels compares the two).
+      cv::Mat dx, dy;
+      cv::Scharr(image, dx, CV_16S, 1, 0, 1.0, 0.0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+      cv::Scharr(image, dy, CV_16S, 0, 1, 1.0, 0.0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+      cv::Mat derivatives = frame->pyramid[2 * level + 1];
+      cv::merge(std::vector<cv::Mat>{dx, dy}, derivatives);
+    }
   }
+  frame->complete_levels = config_.derivatives_on_demand ? 0u : ~0u;
   frame->features.clear();
   frame->detected_cells = frame->detected_features = 0;
   frame->strongest_corner = 0.0f;
@@ -190,18 +257,53 @@ void KltRegistrar::prepare(const cv::Mat& gray, Frame* frame) {
   diagnostics_.pyramid_ms += msSince(start);
 }
 
-void KltRegistrar::computeDerivatives(Frame* frame, const std::vector<cv::Point2f>& points, size_t first) {
+void KltRegistrar::buildImagePyramid(const cv::Mat& gray, Frame* frame) {
+  // cv::buildOpticalFlowPyramid's layout (each level inside a buffer with a reflected border of the window's size,
+  // as many levels as are larger than the window), each level filtered down from the one below by downsample().
+  const int border_x = window_.width, border_y = window_.height;
+  frame->image_buffers.resize(config_.pyramid_levels);
+  frame->images.resize(config_.pyramid_levels);
+  cv::Size size = gray.size();
+  int level = 0;
+  for (;; ++level) {
+    cv::Mat& buffer = frame->image_buffers[level];
+    const cv::Size padded(size.width + 2 * border_x, size.height + 2 * border_y);
+    if (buffer.size() != padded || buffer.type() != CV_8UC1) buffer.create(padded, CV_8UC1);
+    cv::Mat& image = frame->images[level];
+    image = buffer(cv::Rect(border_x, border_y, size.width, size.height));
+    if (level == 0) {
+      if (gray.data == image.data && gray.step == image.step) {  // written in place (nextImageBuffer)
+        cv::copyMakeBorder(image, buffer, border_y, border_y, border_x, border_x,
+                           cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+      } else {  // a copy: the caller may overwrite its image before the next call
+        cv::copyMakeBorder(gray, buffer, border_y, border_y, border_x, border_x, cv::BORDER_REFLECT_101);
+      }
+    } else {
+      downsample(frame->image_buffers[level - 1], border_x, border_y, &image);
+      cv::copyMakeBorder(image, buffer, border_y, border_y, border_x, border_x,
+                         cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+    }
+    const cv::Size next((size.width + 1) / 2, (size.height + 1) / 2);
+    if (level + 1 >= config_.pyramid_levels || next.width <= window_.width || next.height <= window_.height) break;
+    size = next;
+  }
+  frame->max_level = level;
+  frame->images.resize(level + 1);
+}
+
+void KltRegistrar::computeDerivatives(Frame* frame, const std::vector<cv::Point2f>& points, size_t first, int min_level,
+                                      int max_level) {
   if (!config_.derivatives_on_demand || first >= points.size()) return;
   // Lucas-Kanade reads the derivatives over the window (+1 for the bilinear interpolation) around each point.
   const int half = config_.window_px / 2 + 2;
   const double patch_area = (2.0 * half + 1.0) * (2.0 * half + 1.0);
-  for (int level = 0; level <= frame->max_level; ++level) {
+  for (int level = min_level; level <= std::min(max_level, frame->max_level); ++level) {
     if (frame->complete_levels & (1u << level)) continue;
     const cv::Mat& image = frame->pyramid[2 * level];
     cv::Mat& derivatives = frame->pyramid[2 * level + 1];
     if ((points.size() - first) * patch_area >= 0.5 * image.total()) {
       // Coarse levels: the patches would cover most of the level anyway.
-      scharrDerivatives(image, 0, 0, image.cols, image.rows, &scharr_rows_, &derivatives);
+      scharrDerivatives(image, 0, 0, image.cols, image.rows, &derivatives);
       frame->complete_levels |= 1u << level;
       continue;
     }
@@ -210,7 +312,7 @@ void KltRegistrar::computeDerivatives(Frame* frame, const std::vector<cv::Point2
       const int cx = cvFloor(points[i].x * scale), cy = cvFloor(points[i].y * scale);
       const int x0 = std::max(0, cx - half), x1 = std::min(image.cols, cx + half + 1);
       const int y0 = std::max(0, cy - half), y1 = std::min(image.rows, cy + half + 1);
-      if (x0 < x1 && y0 < y1) scharrDerivatives(image, x0, y0, x1, y1, &scharr_rows_, &derivatives);
+      if (x0 < x1 && y0 < y1) scharrDerivatives(image, x0, y0, x1, y1, &derivatives);
     }
   }
 }
@@ -354,7 +456,7 @@ void KltRegistrar::topUpFeatures(Frame* frame) {
     ++cell_count_[c.cell];
     ++detected;
   }
-  computeDerivatives(frame, features, features.size() - detected);
+  computeDerivatives(frame, features, features.size() - detected, 0, 0);  // the coarser levels when tracked there
   frame->detected_features = static_cast<int>(features.size());
   frame->detected_cells =
       static_cast<int>(std::count_if(cell_count_.begin(), cell_count_.end(), [](int n) { return n > 0; }));
@@ -362,8 +464,123 @@ void KltRegistrar::topUpFeatures(Frame* frame) {
   diagnostics_.detect_ms += msSince(start);
 }
 
-void KltRegistrar::estimate(const Frame& previous, Frame* current, const Eigen::Matrix3d& prediction_px,
+int KltRegistrar::trackForward(Frame* previous, const Frame& current, const Eigen::Matrix3d& prediction_px,
+                               int all_levels, bool whole_pyramid, const cv::TermCriteria& criteria) {
+  // The finest level's derivatives are there around every feature (computed when it was tracked into, or detected
+  // in, that image); the coarser levels' are computed here for the features tracked on them.
+  const std::vector<cv::Point2f>& features = previous->features;
+  const int n = static_cast<int>(features.size());
+  forward_.resize(n);
+  for (int i = 0; i < n; ++i) forward_[i] = transfer(prediction_px, features[i]);
+  const int fine_levels = std::min(all_levels, config_.predicted_pyramid_levels - 1);
+  const int probes = std::min(n, config_.prediction_probes);
+  if (whole_pyramid || fine_levels == all_levels || prediction_px.isIdentity(1e-12) || probes == 0) {
+    computeDerivatives(previous, features, 0, 1, all_levels);
+    cv::calcOpticalFlowPyrLK(previous->pyramid, current.pyramid, features, forward_, status_, error_, window_,
+                             all_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    return all_levels;
+  }
+  // The coarse levels serve to find motions that the prediction has not taken out. A few features spread over the
+  // list (and so over the image) are tracked on the whole pyramid first: if most of them end up near where the
+  // prediction sent them, the others need only the fine levels. Checked, because a track that starts too far away
+  // for the levels it runs on may stay where it started, and so may its backward track: the forward-backward check
+  // would not see it.
+  group_.clear();
+  for (int p = 0; p < probes; ++p) group_.push_back(static_cast<int>((static_cast<int64_t>(p) * n) / probes));
+  group_to_.resize(probes);
+  group_start_.resize(probes);
+  for (int p = 0; p < probes; ++p) {
+    group_to_[p] = features[group_[p]];
+    group_start_[p] = forward_[group_[p]];
+  }
+  computeDerivatives(previous, group_to_, 0, 1, all_levels);
+  cv::calcOpticalFlowPyrLK(previous->pyramid, current.pyramid, group_to_, group_start_, group_status_, error_, window_,
+                           all_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+  probe_misses_.clear();
+  for (int p = 0; p < probes; ++p) {
+    if (!group_status_[p]) continue;
+    const cv::Point2f d = group_start_[p] - forward_[group_[p]];
+    probe_misses_.push_back(d.x * d.x + d.y * d.y);
+  }
+  // Three quarters of the probes within tolerance (the others may be on particles, or lost).
+  const size_t quartile = (3 * static_cast<size_t>(probes) + 3) / 4;
+  bool trusted = probe_misses_.size() >= quartile;
+  if (trusted) {
+    std::nth_element(probe_misses_.begin(), probe_misses_.begin() + (quartile - 1), probe_misses_.end());
+    trusted = probe_misses_[quartile - 1] <= config_.prediction_tolerance_px * config_.prediction_tolerance_px;
+  }
+  diagnostics_.prediction_trusted = trusted;
+  if (!trusted) {
+    computeDerivatives(previous, features, 0, 1, all_levels);
+    cv::calcOpticalFlowPyrLK(previous->pyramid, current.pyramid, features, forward_, status_, error_, window_,
+                             all_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    return all_levels;
+  }
+  // The probes keep their tracks; the others run on the fine levels.
+  status_.assign(n, 0);
+  is_probe_.assign(n, 0);
+  for (int p = 0; p < probes; ++p) {
+    forward_[group_[p]] = group_start_[p];
+    status_[group_[p]] = group_status_[p];
+    is_probe_[group_[p]] = 1;
+  }
+  group_.clear();
+  for (int i = 0; i < n; ++i)
+    if (!is_probe_[i]) group_.push_back(i);
+  group_to_.resize(group_.size());
+  group_start_.resize(group_.size());
+  for (size_t g = 0; g < group_.size(); ++g) {
+    group_to_[g] = features[group_[g]];
+    group_start_[g] = forward_[group_[g]];
+  }
+  if (!group_.empty()) {
+    computeDerivatives(previous, group_to_, 0, 1, fine_levels);
+    cv::calcOpticalFlowPyrLK(previous->pyramid, current.pyramid, group_to_, group_start_, group_status_, error_,
+                             window_, fine_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+  }
+  for (size_t g = 0; g < group_.size(); ++g) {
+    forward_[group_[g]] = group_start_[g];
+    status_[group_[g]] = group_status_[g];
+  }
+  return fine_levels;
+}
+
+void KltRegistrar::trackBackward(Frame* from, const Frame& to, int levels, const cv::TermCriteria& criteria) {
+  back_status_.assign(to_.size(), 0);
+  if (to_.empty()) return;
+  // A backward track that starts within fb_fine_start_px * 2^L of its feature needs no level coarser than L to
+  // get there (a good prediction puts nearly all of them on the finest level); each level costs as much as the
+  // finest one, so the tracks are grouped by the coarsest level they need.
+  for (int level = 0; level <= levels; ++level) {
+    const double reach_px = config_.fb_fine_start_px * double(1 << level);
+    group_.clear();
+    for (size_t k = 0; k < to_.size(); ++k) {
+      if (back_status_[k] != 0) continue;  // tracked, or lost, on a finer level
+      const cv::Point2f d = backward_[k] - from_[k];
+      if (level == levels || (reach_px > 0.0 && d.x * d.x + d.y * d.y <= reach_px * reach_px))
+        group_.push_back(static_cast<int>(k));
+    }
+    if (group_.empty()) continue;
+    group_to_.resize(group_.size());
+    group_start_.resize(group_.size());
+    for (size_t g = 0; g < group_.size(); ++g) {
+      group_to_[g] = to_[group_[g]];
+      group_start_[g] = backward_[group_[g]];
+    }
+    computeDerivatives(from, group_to_, 0, 1, level);  // the finest level's are there around every track
+    cv::calcOpticalFlowPyrLK(from->pyramid, to.pyramid, group_to_, group_start_, group_status_, error_, window_, level,
+                             criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    for (size_t g = 0; g < group_.size(); ++g) {
+      backward_[group_[g]] = group_start_[g];
+      back_status_[group_[g]] = group_status_[g] ? 2 : 3;  // 2: tracked, 3: lost (a coarser level would not help)
+    }
+  }
+  for (uchar& s : back_status_) s = s == 2;
+}
+
+void KltRegistrar::estimate(Frame* previous_frame, Frame* current, const Eigen::Matrix3d& prediction_px,
                             MotionEstimate* result) {
+  const Frame& previous = *previous_frame;
   auto fail = [result](FailureReason reason, const std::string& detail) {
     result->failed = true;
     result->failure = reason;
@@ -380,43 +597,48 @@ void KltRegistrar::estimate(const Frame& previous, Frame* current, const Eigen::
 
   // --- Forward tracking from where the prediction sends each feature, then backward from where the inverse
   // prediction sends each track: the two start from different places, so that a track that converged to a wrong
-  // local minimum does not come back to its feature. ---
+  // local minimum does not come back to its feature. A checked prediction lets most tracks skip the coarse levels
+  // (trackForward); if too few tracks come back all the same, they are tracked again on the whole pyramid. ---
   Clock::time_point start = Clock::now();
   const int width = current->size.width, height = current->size.height;
   const std::vector<cv::Point2f>& features = previous.features;
   const int n = static_cast<int>(features.size());
-  forward_.resize(n);
-  for (int i = 0; i < n; ++i) forward_[i] = transfer(prediction_px, features[i]);
-  const int levels = std::min(previous.max_level, current->max_level);
+  const int all_levels = std::min(previous.max_level, current->max_level);
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, config_.lk_max_iterations,
                                   config_.lk_epsilon_px);
-  cv::calcOpticalFlowPyrLK(previous.pyramid, current->pyramid, features, forward_, status_, error_, window_, levels,
-                           criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
-  from_.clear();
-  to_.clear();
-  for (int i = 0; i < n; ++i) {
-    const cv::Point2f& b = forward_[i];
-    if (!status_[i] || !(b.x >= 0.0f && b.y >= 0.0f && b.x <= width - 1 && b.y <= height - 1)) continue;
-    from_.push_back(features[i]);
-    to_.push_back(b);
-  }
-  computeDerivatives(current, to_);  // the backward pass reads them around to_, the next pair around the inliers
   const Eigen::Matrix3d inverse_prediction = prediction_px.inverse();
-  backward_.resize(to_.size());
-  for (size_t k = 0; k < to_.size(); ++k) backward_[k] = transfer(inverse_prediction, to_[k]);
-  if (!to_.empty())
-    cv::calcOpticalFlowPyrLK(current->pyramid, previous.pyramid, to_, backward_, back_status_, error_, window_, levels,
-                             criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
   const float fb_sq = static_cast<float>(config_.fb_threshold_px * config_.fb_threshold_px);
   size_t kept = 0;
-  for (size_t k = 0; k < to_.size(); ++k) {
-    const cv::Point2f d = backward_[k] - from_[k];
-    if (!back_status_[k] || !(d.x * d.x + d.y * d.y <= fb_sq)) continue;
-    from_[kept] = from_[k];
-    to_[kept++] = to_[k];
+  bool whole_pyramid = false;
+  for (;;) {
+    const int levels = trackForward(previous_frame, *current, prediction_px, all_levels, whole_pyramid, criteria);
+    from_.clear();
+    to_.clear();
+    for (int i = 0; i < n; ++i) {
+      const cv::Point2f& b = forward_[i];
+      if (!status_[i] || !(b.x >= 0.0f && b.y >= 0.0f && b.x <= width - 1 && b.y <= height - 1)) continue;
+      from_.push_back(features[i]);
+      to_.push_back(b);
+    }
+    // The finest level's derivatives around to_: the backward pass reads them, the next pair around the inliers.
+    computeDerivatives(current, to_, 0, 0, 0);
+    backward_.resize(to_.size());
+    for (size_t k = 0; k < to_.size(); ++k) backward_[k] = transfer(inverse_prediction, to_[k]);
+    trackBackward(current, previous, levels, criteria);
+    kept = 0;
+    for (size_t k = 0; k < to_.size(); ++k) {
+      const cv::Point2f d = backward_[k] - from_[k];
+      if (!back_status_[k] || !(d.x * d.x + d.y * d.y <= fb_sq)) continue;
+      from_[kept] = from_[k];
+      to_[kept++] = to_[k];
+    }
+    from_.resize(kept);
+    to_.resize(kept);
+    if (levels == all_levels || (static_cast<int>(kept) >= config_.min_tracks && kept >= config_.retrack_fraction * n))
+      break;
+    whole_pyramid = true;  // the prediction missed after all
+    diagnostics_.retracked = true;
   }
-  from_.resize(kept);
-  to_.resize(kept);
   diagnostics_.tracked = static_cast<int>(kept);
   result->observations = static_cast<int>(kept);
   diagnostics_.track_ms += msSince(start);
@@ -475,6 +697,14 @@ void KltRegistrar::estimate(const Frame& previous, Frame* current, const Eigen::
   current->strongest_corner = previous.strongest_corner;
 }
 
+cv::Mat KltRegistrar::nextImageBuffer(const cv::Size& size) {
+  if (current_.image_buffers.empty()) current_.image_buffers.resize(1);
+  cv::Mat& buffer = current_.image_buffers[0];
+  const cv::Size padded(size.width + 2 * window_.width, size.height + 2 * window_.height);
+  if (buffer.size() != padded || buffer.type() != CV_8UC1) buffer.create(padded, CV_8UC1);
+  return buffer(cv::Rect(window_.width, window_.height, size.width, size.height));
+}
+
 MotionEstimate KltRegistrar::registerNext(const cv::Mat& gray, const Eigen::Matrix3d& prediction_px) {
   const Clock::time_point start = Clock::now();
   diagnostics_ = KltDiagnostics();
@@ -496,7 +726,7 @@ MotionEstimate KltRegistrar::registerNext(const cv::Mat& gray, const Eigen::Matr
     result.failure_detail =
         "image size " + sizeString(current_.size) + " differs from the previous image's " + sizeString(previous_.size);
   } else {
-    estimate(previous_, &current_, prediction_px, &result);
+    estimate(&previous_, &current_, prediction_px, &result);
   }
   // A failed pair leaves no features: detect afresh. Otherwise only top up when the tracks have thinned out.
   if (current_.usable && (result.failed || needsDetection(current_))) topUpFeatures(&current_);
@@ -530,7 +760,7 @@ MotionEstimate KltRegistrar::registerPair(const cv::Mat& previous, const cv::Mat
   prepare(previous, &a);
   if (a.usable) topUpFeatures(&a);
   prepare(current, &b);
-  estimate(a, &b, prediction_px, &result);
+  estimate(&a, &b, prediction_px, &result);
   result.elapsed_ms = msSince(start);
   return result;
 }

@@ -4,8 +4,6 @@
 #include <sstream>
 #include <stdexcept>
 
-#include <opencv2/imgproc.hpp>
-
 namespace exocet_mosaic {
 namespace registration {
 
@@ -13,22 +11,21 @@ NormalizingRegistrar::NormalizingRegistrar(std::unique_ptr<FrameRegistrar> inner
                                            const IlluminationNormalizerConfig& config)
     : inner_(std::move(inner)), normalizer_(config) {
   if (!inner_) throw std::invalid_argument("NormalizingRegistrar needs a registrar");
+  klt_ = dynamic_cast<KltRegistrar*>(inner_.get());
 }
 
-bool NormalizingRegistrar::checkInput(const cv::Mat& gray, MotionEstimate* failure) const {
+bool NormalizingRegistrar::normalize(const cv::Mat& gray, cv::Mat* out, MotionEstimate* failure) {
+  InputStatistics input;
+  normalizer_.apply(gray, out, &input);
   if (gray.empty() || gray.type() != CV_8UC1) return true;  // the inner registrar reports kInvalidInput
-  cv::Scalar mean, stddev;
-  cv::Mat small;
-  cv::resize(gray, small, cv::Size(), 0.25, 0.25, cv::INTER_AREA);
-  cv::meanStdDev(small, mean, stddev);
   const IlluminationNormalizerConfig& c = normalizer_.config();
-  if (mean[0] >= c.min_mean_grey && stddev[0] >= c.min_stddev_grey) return true;
+  if (input.mean_grey >= c.min_mean_grey && input.stddev_grey >= c.min_stddev_grey) return true;
   std::ostringstream detail;
-  detail << "image mean " << mean[0] << " and standard deviation " << stddev[0]
+  detail << "image mean " << input.mean_grey << " and standard deviation " << input.stddev_grey
          << " grey levels; at least " << c.min_mean_grey << " and " << c.min_stddev_grey << " are needed";
   *failure = MotionEstimate();
   failure->failed = true;
-  failure->failure = mean[0] < c.min_mean_grey ? FailureReason::kTooDark : FailureReason::kTooLittleTexture;
+  failure->failure = input.mean_grey < c.min_mean_grey ? FailureReason::kTooDark : FailureReason::kTooLittleTexture;
   failure->failure_detail = detail.str();
   failure->method = inner_->method();
   return false;
@@ -37,9 +34,15 @@ bool NormalizingRegistrar::checkInput(const cv::Mat& gray, MotionEstimate* failu
 MotionEstimate NormalizingRegistrar::registerNext(const cv::Mat& gray, const Eigen::Matrix3d& prediction_px) {
   const auto start = std::chrono::steady_clock::now();
   MotionEstimate dark;
-  const bool usable = checkInput(gray, &dark);
+  if (klt_ && !gray.empty() && gray.type() == CV_8UC1) {
+    // Straight into the KLT pyramid's finest level, which spares a copy of the image.
+    normalized_ = klt_->nextImageBuffer(gray.size());
+  } else if (normalized_.u && normalized_.u->refcount > 1) {
+    normalized_.release();  // should a registrar have kept a reference to the last image after all, it stays intact
+  }
+  const bool usable = normalize(gray, &normalized_, &dark);
   // Even a dark image goes through, so that the inner registrar's sequence stays in step (and fails on it).
-  MotionEstimate e = inner_->registerNext(normalizer_.apply(gray), prediction_px);
+  MotionEstimate e = inner_->registerNext(normalized_, prediction_px);
   if (!usable && !e.failed) e = dark;
   if (!usable && e.failed && e.failure != FailureReason::kNoPreviousFrame && e.failure != FailureReason::kInvalidInput)
     e = dark;
@@ -51,8 +54,10 @@ MotionEstimate NormalizingRegistrar::registerPair(const cv::Mat& previous, const
                                                   const Eigen::Matrix3d& prediction_px) {
   const auto start = std::chrono::steady_clock::now();
   MotionEstimate dark;
-  if (!checkInput(previous, &dark) || !checkInput(current, &dark)) return dark;
-  MotionEstimate e = inner_->registerPair(normalizer_.apply(previous), normalizer_.apply(current), prediction_px);
+  for (cv::Mat* buffer : {&normalized_, &normalized_previous_})
+    if (buffer->u && buffer->u->refcount > 1) buffer->release();
+  if (!normalize(previous, &normalized_previous_, &dark) || !normalize(current, &normalized_, &dark)) return dark;
+  MotionEstimate e = inner_->registerPair(normalized_previous_, normalized_, prediction_px);
   e.elapsed_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return e;
 }

@@ -42,6 +42,11 @@ void readKlt(const SectionReader& s, registration::KltConfig* c) {
   s.integer("lk_max_iterations", &c->lk_max_iterations);
   s.number("lk_epsilon_px", &c->lk_epsilon_px);
   s.number("fb_threshold_px", &c->fb_threshold_px);
+  s.integer("predicted_pyramid_levels", &c->predicted_pyramid_levels);
+  s.integer("prediction_probes", &c->prediction_probes);
+  s.number("prediction_tolerance_px", &c->prediction_tolerance_px);
+  s.number("retrack_fraction", &c->retrack_fraction);
+  s.number("fb_fine_start_px", &c->fb_fine_start_px);
   s.integer("min_tracks", &c->min_tracks);
   s.integer("min_inliers", &c->min_inliers);
   s.number("min_inlier_fraction", &c->min_inlier_fraction);

@@ -4,13 +4,21 @@
  * pyramidal Lucas-Kanade with a forward-backward check, and a robust least-squares fit of the motion model to the
  * tracks. No ROS in it.
  *
- * Per image, registerNext() builds the image's pyramid once; it serves as the "current" pyramid of this pair, and as
- * the "previous" one of the next pair. The image derivatives that Lucas-Kanade needs are computed only around the
- * points it tracks (KltConfig::derivatives_on_demand). Features live from image to image: the inlier tracks of a
- * pair are the features of the next pair, and new ones are detected (in the empty grid cells only, on a coarse
- * pyramid level) when the set thins out, so that detection is amortised over several images. The forward track
- * starts where the prediction sends the feature, the backward one where the inverse prediction sends the track: two
- * independent starts, so that a track caught in a wrong local minimum does not come back to its feature.
+ * Per image, registerNext() builds the image's pyramid once (each level the [1 3 3 1] binomial reduction of the one
+ * below); it serves as the "current" pyramid of this pair, and as the "previous" one of the next pair. The image
+ * derivatives that Lucas-Kanade needs are computed only around the points it tracks, and only on the levels it tracks
+ * them on (KltConfig::derivatives_on_demand). Features live from image to image: the inlier tracks of a pair are the
+ * features of the next pair, and new ones are detected (in the empty grid cells only, on a coarse pyramid level)
+ * when the set thins out, so that detection is amortised over several images. The forward track starts where the
+ * prediction sends the feature, the backward one where the inverse prediction sends the track: two independent
+ * starts, so that a track caught in a wrong local minimum does not come back to its feature.
+ *
+ * Every pyramid level costs Lucas-Kanade as much as the finest one, and the coarse levels only serve to find the
+ * motion that the prediction has not taken out. So with a prediction, a few features (prediction_probes) are tracked
+ * on the whole pyramid first; if they confirm it (prediction_tolerance_px), the others are tracked on the finest
+ * level(s) only (predicted_pyramid_levels), and, should too few of them come back (retrack_fraction), again on the
+ * whole pyramid. Each backward track runs on the levels that the distance from its start to its feature calls for
+ * (fb_fine_start_px).
  */
 #pragma once
 
@@ -42,7 +50,7 @@ struct KltConfig {
   double quality_level = 0.02;       ///< a corner must reach this fraction of the strongest one, [0, 1)
   double min_eigenvalue = 2e-4;      ///< absolute floor of the smaller eigenvalue (cv::cornerMinEigenVal units), [0, 1]
   int block_size = 5;                ///< gradient window of the detector (pixels of the detection level), odd [3, 15]
-  int detection_max_width_px = 480;  ///< detect on the finest pyramid level at most this wide, [64, 100000]
+  int detection_max_width_px = 240;  ///< detect on the finest pyramid level at most this wide, [64, 100000]
   int min_features = 20;             ///< fewer features in an image: too little texture, [1, max_features]
   /// Detect again when the tracked features or the grid cells holding one fall below this fraction of what the last
   /// detection left, [0, 1] (0: only when a registration failed).
@@ -54,6 +62,23 @@ struct KltConfig {
   int lk_max_iterations = 20;    ///< per level, [1, 100]
   double lk_epsilon_px = 0.03;   ///< per level: stop when the update is smaller, (0, 1]
   double fb_threshold_px = 0.5;  ///< largest forward-backward distance of a kept track, (0, 20]
+  /// With a prediction (prediction_px not the identity) that the probes confirm, the features track on this many
+  /// finest levels only, [1, 8] (at most pyramid_levels): the coarse levels serve to find the motion that the
+  /// prediction has not taken out, and each costs as much as the finest.
+  int predicted_pyramid_levels = 1;
+  /// Features (spread over the image) tracked on the whole pyramid first to check the prediction, [0, 1000]
+  /// (0: the whole pyramid for every feature).
+  int prediction_probes = 16;
+  /// The prediction is confirmed when three quarters of the probes end up within this distance of where it sent
+  /// them, (0, 100].
+  double prediction_tolerance_px = 1.0;
+  /// If fewer tracks than this fraction of the features (or than min_tracks) come back from the fine levels, the
+  /// prediction missed all the same: they are tracked again on the whole pyramid, [0, 1].
+  double retrack_fraction = 0.5;
+  /// The backward track starts where the inverse prediction sends the forward track; when that start lies within
+  /// fb_fine_start_px * 2^L of the feature, the backward track runs on the L finest levels only (no coarse search
+  /// is needed to get back, and every level costs as much as the finest). 0: always the whole pyramid. [0, 100]
+  double fb_fine_start_px = 1.5;
   /// Compute the image derivatives only around the points to track, not over whole pyramid levels: the same values
   /// (so the same tracks, bit for bit) at a fraction of the cost on large images. false: whole levels, as
   /// cv::buildOpticalFlowPyramid does.
@@ -76,8 +101,9 @@ struct KltConfig {
   /// various depths (marine snow in turbid water) do not.
   double max_local_residual_px = 0.3;
   /// Factor on the fit's covariance, [1, 100]: the residuals do not show the errors that all tracks share
-  /// (interpolation biases, blur); on the rendered benchmark dive the corner NEES says about 2, hence the default.
-  double covariance_inflation = 2.0;
+  /// (interpolation biases, blur); on the rendered benchmark dive the corner NEES says about 1.5 (homography model,
+  /// the defaults), hence 1.6, slightly conservative (NEES ratio 0.94 there).
+  double covariance_inflation = 1.6;
   double max_motion_fraction = 0.5;  ///< an image corner moving further than this fraction of the image's smaller
                                      ///< side: failure kMotionTooLarge, (0, 10]
 
@@ -93,14 +119,16 @@ struct KltConfig {
 
 /// What the last registerNext() / registerPair() call did (for benchmarks and diagnostics).
 struct KltDiagnostics {
-  int features = 0;                ///< features of the previous image that were tracked
-  int tracked = 0;                 ///< tracks that converged, stayed in the image and passed the forward-backward check
-  int detected = 0;                ///< new features detected in the current image (0 if there was no detection)
-  double pyramid_ms = 0.0;         ///< building the current image's pyramid
-  double track_ms = 0.0;           ///< forward and backward Lucas-Kanade
-  double fit_ms = 0.0;             ///< robust fit
-  double detect_ms = 0.0;          ///< feature detection (topping up the empty cells)
-  double local_residual_px = 0.0;  ///< RobustFit::local_scale_px of the fit
+  int features = 0;         ///< features of the previous image that were tracked
+  int tracked = 0;          ///< tracks that converged, stayed in the image and passed the forward-backward check
+  int detected = 0;         ///< new features detected in the current image (0 if there was no detection)
+  double pyramid_ms = 0.0;  ///< building the current image's pyramid
+  double track_ms = 0.0;    ///< forward and backward Lucas-Kanade
+  double fit_ms = 0.0;      ///< robust fit
+  double detect_ms = 0.0;   ///< feature detection (topping up the empty cells)
+  bool prediction_trusted = false;  ///< the probes confirmed the prediction: most tracks on the fine levels only
+  bool retracked = false;           ///< tracked again on the whole pyramid (KltConfig::retrack_fraction)
+  double local_residual_px = 0.0;   ///< RobustFit::local_scale_px of the fit
 };
 
 /**
@@ -123,6 +151,12 @@ class KltRegistrar : public FrameRegistrar {
                               const Eigen::Matrix3d& prediction_px = Eigen::Matrix3d::Identity()) override;
   RegistrationMethod method() const override { return RegistrationMethod::kKlt; }
 
+  /**
+   * Where the next image can be written so that registerNext() need not copy it (the pyramid's finest level, inside
+   * its border): a CV_8UC1 image of `size`, to be filled and then passed as is to registerNext(). Any other image
+   * is copied as usual. Valid until the next call of any other method.
+   */
+  cv::Mat nextImageBuffer(const cv::Size& size);
   const KltConfig& config() const { return config_; }
   const KltDiagnostics& lastDiagnostics() const { return diagnostics_; }
   /// Features held for the next registerNext() call (pixels of the last image).
@@ -133,9 +167,11 @@ class KltRegistrar : public FrameRegistrar {
   struct Frame {
     std::vector<cv::Mat> pyramid;  ///< cv::buildOpticalFlowPyramid's layout: level L image at 2L, derivatives at 2L+1
     int max_level = 0;             ///< coarsest level built
-    // derivatives_on_demand: the images, and the bordered buffers whose interiors are pyramid[2L + 1]; the
-    // derivatives are valid around every point of `features` (and wholly on the levels flagged in complete_levels).
+    // The images (interiors of image_buffers, which hold a reflected border), and the buffers whose interiors are
+    // pyramid[2L + 1] (zero border). derivatives_on_demand: the derivatives are valid around every point of
+    // `features` (and wholly on the levels flagged in complete_levels).
     std::vector<cv::Mat> images;
+    std::vector<cv::Mat> image_buffers;
     std::vector<cv::Mat> derivative_buffers;
     unsigned complete_levels = 0;
     cv::Size size;
@@ -148,13 +184,26 @@ class KltRegistrar : public FrameRegistrar {
   };
 
   void prepare(const cv::Mat& gray, Frame* frame);
-  /// derivatives_on_demand: computes the derivatives around points[first...] on every level of `frame`.
-  void computeDerivatives(Frame* frame, const std::vector<cv::Point2f>& points, size_t first = 0);
+  /// The image levels of `frame` (images, image_buffers, max_level), each the [1 3 3 1] reduction of the one below.
+  void buildImagePyramid(const cv::Mat& gray, Frame* frame);
+  /// derivatives_on_demand: computes the derivatives around points[first...] on levels min_level ... max_level of
+  /// `frame` (those that exist).
+  void computeDerivatives(Frame* frame, const std::vector<cv::Point2f>& points, size_t first, int min_level,
+                          int max_level);
   /// Detects features in the empty cells of `frame` (all cells if `frame` has none), keeping the existing ones.
   void topUpFeatures(Frame* frame);
   /// Whether the surviving tracks have thinned out enough to detect again.
   bool needsDetection(const Frame& frame) const;
-  void estimate(const Frame& previous, Frame* current, const Eigen::Matrix3d& prediction_px, MotionEstimate* result);
+  /// Registers `previous` (its features) to `current`, whose features it sets; both frames get derivatives.
+  void estimate(Frame* previous, Frame* current, const Eigen::Matrix3d& prediction_px, MotionEstimate* result);
+  /// Tracks the previous image's features forward into forward_ and status_, from where the prediction sends them:
+  /// on the whole pyramid, or (with a prediction the probes confirm, and not whole_pyramid) mostly on the fine
+  /// levels. Returns the coarsest level used.
+  int trackForward(Frame* previous, const Frame& current, const Eigen::Matrix3d& prediction_px, int all_levels,
+                   bool whole_pyramid, const cv::TermCriteria& criteria);
+  /// Tracks to_ back from `from` to `to`, starting at backward_ (results in backward_ and back_status_), each track
+  /// on as few levels as its start needs (fb_fine_start_px), at most `levels`.
+  void trackBackward(Frame* from, const Frame& to, int levels, const cv::TermCriteria& criteria);
   MotionEstimate emptyEstimate(const cv::Size& size) const;
 
   KltConfig config_;
@@ -166,12 +215,15 @@ class KltRegistrar : public FrameRegistrar {
 
   // Scratch buffers, kept to avoid allocations per image.
   std::vector<cv::Point2f> forward_, backward_, from_, to_;
-  std::vector<uchar> status_, back_status_;
+  std::vector<uchar> status_, back_status_, group_status_;
+  std::vector<int> group_;
+  std::vector<cv::Point2f> group_to_, group_start_;
+  std::vector<float> probe_misses_;
+  std::vector<uchar> is_probe_;
   std::vector<float> error_;
   std::vector<int> kept_;
   cv::Mat eigen_;
   std::vector<cv::Rect> rois_;
-  std::vector<int16_t> scharr_rows_;
   std::vector<int> cell_count_, occupancy_head_, occupancy_next_;
   struct Candidate {
     float strength;

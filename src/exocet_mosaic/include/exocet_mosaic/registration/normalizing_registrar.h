@@ -1,7 +1,7 @@
 /**
  * @file normalizing_registrar.h
- * @brief A registrar that hands another one illumination-normalised images (see illumination_normalizer.h).
- * No ROS in it.
+ * @brief A registrar that hands another one illumination-normalised images (see illumination_normalizer.h), after
+ * checking that the camera's image is bright and contrasted enough. No ROS in it.
  */
 #pragma once
 
@@ -9,6 +9,7 @@
 
 #include "exocet_mosaic/registration/frame_registrar.h"
 #include "exocet_mosaic/registration/illumination_normalizer.h"
+#include "exocet_mosaic/registration/klt_registrar.h"
 
 namespace exocet_mosaic {
 namespace registration {
@@ -26,11 +27,15 @@ class NormalizingRegistrar : public FrameRegistrar {
   FrameRegistrar& inner() { return *inner_; }
 
  private:
-  /// The darkness and texture checks judge the camera's image, not the normalised one: they run here first.
-  bool checkInput(const cv::Mat& gray, MotionEstimate* failure) const;
+  /// Normalises `gray` into `out`. The darkness and texture checks judge the camera's image, not the normalised
+  /// one (its statistics come from the normaliser's pass): false, and `failure` filled, when it fails them.
+  bool normalize(const cv::Mat& gray, cv::Mat* out, MotionEstimate* failure);
 
   std::unique_ptr<FrameRegistrar> inner_;
+  KltRegistrar* klt_ = nullptr;  ///< inner_ when it is a KLT registrar: the normaliser writes into its pyramid
   IlluminationNormalizer normalizer_;
+  // The normalised images, reused from call to call (registrars copy what they keep of an image).
+  cv::Mat normalized_, normalized_previous_;
 };
 
 }  // namespace registration
