@@ -173,9 +173,11 @@ NavigationFilter::Working NavigationFilter::workingFrom(const FilterStep& step, 
   w.stamp_s = step.stamp_s;
   w.x = prior ? step.x_prior : step.x_posterior;
   w.P = prior ? step.P_prior : step.P_posterior;
-  w.consecutive_fix_rejections = step.consecutive_fix_rejections;
-  w.consecutive_dr_rejections = step.consecutive_dr_rejections;
-  w.dr_initialized = step.dr_initialized;
+  if (!prior) {  // the prior is only restarted from at the initial step, whose bookkeeping starts afresh
+    w.consecutive_fix_rejections = step.consecutive_fix_rejections;
+    w.consecutive_dr_rejections = step.consecutive_dr_rejections;
+    w.dr_initialized = step.dr_initialized;
+  }
   return w;
 }
 

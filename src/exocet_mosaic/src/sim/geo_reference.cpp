@@ -40,7 +40,7 @@ Eigen::Vector2d latLonToGrid(const GeoReference& ref, double latitude_deg, doubl
   GeographicLib::UTMUPS::Forward(latitude_deg, longitude_deg, zone, north, x, y, gamma, k, ref.utm_zone);
   if (north != ref.northern_hemisphere) {
     // Same zone, other hemisphere's false northing: express in the dive's hemisphere convention.
-    y += north ? -10000000.0 : 10000000.0;
+    y += north ? 10000000.0 : -10000000.0;  // north of the equator seen from the south: +10000 km
   }
   return {x, y};
 }

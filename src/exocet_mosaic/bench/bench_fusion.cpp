@@ -1,0 +1,850 @@
+// Benchmark of the navigation fusion (2D3 sections 3.3 and 3.5): the report's out-and-back experiment (figure 5) on
+// a simulated dive with ground truth. The simulator runs in-process (frames, navigation and truth captured from its
+// sink, cached on disk under --output-dir/cache); consecutive frames are registered (homography, method auto),
+// converted to metres (attitude from the IMU, height from the altimeter, the rig's camera), and fed with the dead
+// reckoning and the late USBL fixes, in arrival order, to the navigation filter; the RTS smoother runs over the whole
+// dive. Every track is scored against the true camera centre. Writes fusion.json.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "exocet_mosaic/fusion/cross_pass_smoother.h"
+#include "exocet_mosaic/fusion/metric_motion.h"
+#include "exocet_mosaic/fusion/navigation_filter.h"
+#include "exocet_mosaic/fusion/rts_smoother.h"
+#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_mosaic/registration/registration_config.h"
+#include "exocet_mosaic/registration/motion_model.h"
+#include "exocet_mosaic/sim/dive_description.h"
+#include "exocet_mosaic/sim/dive_synthesizer.h"
+#include "exocet_mosaic/sim/vehicle_trajectory.h"
+
+namespace {
+
+using namespace exocet_mosaic;
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+// ---- The simulated dive, captured from the synthesizer's sink, and its cache ------------------------------------
+
+struct CapturedDive {
+  std::vector<cv::Mat> gray;                         ///< CV_8UC1, one per frame (dropped frames left out)
+  std::vector<double> frame_stamps_s;
+  std::vector<Eigen::Isometry3d> world_from_camera;  ///< truth, UTM frame
+  std::vector<double> gsd_m;                         ///< truth: ground sample distance
+  std::vector<double> vehicle_yaw_rad;               ///< truth: ENU yaw of the vehicle
+  std::vector<sim::ImuRecord> imu;
+  std::vector<sim::AltitudeRecord> altitude;
+  std::vector<sim::PoseRecord> dead_reckoning;
+  std::vector<sim::FixRecord> usbl;
+};
+
+constexpr uint64_t kCacheMagic = 0x3145564944535546ULL;  // "FUSDIVE1"
+
+uint64_t fnv1a(const std::string& text) {
+  uint64_t h = 1469598103934665603ULL;
+  for (unsigned char c : text) h = (h ^ c) * 1099511628211ULL;
+  return h;
+}
+
+template <typename T>
+void put(std::ostream& out, const T& v) {
+  out.write(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+template <typename T>
+bool get(std::istream& in, T* v) {
+  return bool(in.read(reinterpret_cast<char*>(v), sizeof(T)));
+}
+template <typename T>
+void putVector(std::ostream& out, const std::vector<T>& v) {
+  put(out, uint64_t(v.size()));
+  if (!v.empty()) out.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
+}
+template <typename T>
+bool getVector(std::istream& in, std::vector<T>* v) {
+  uint64_t n = 0;
+  if (!get(in, &n) || n > (1ULL << 32)) return false;
+  v->resize(n);
+  return n == 0 || bool(in.read(reinterpret_cast<char*>(v->data()), std::streamsize(n * sizeof(T))));
+}
+
+/// Plain-old-data copies of the records (Eigen members are trivially copyable; the rest are doubles).
+void writeCache(const std::string& path, const CapturedDive& d) {
+  const std::string temporary = path + ".partial";
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    put(out, kCacheMagic);
+    putVector(out, d.frame_stamps_s);
+    putVector(out, d.gsd_m);
+    putVector(out, d.vehicle_yaw_rad);
+    std::vector<Eigen::Matrix4d> poses;
+    for (const auto& p : d.world_from_camera) poses.push_back(p.matrix());
+    putVector(out, poses);
+    putVector(out, d.imu);
+    putVector(out, d.altitude);
+    putVector(out, d.dead_reckoning);
+    putVector(out, d.usbl);
+    put(out, int32_t(d.gray.empty() ? 0 : d.gray[0].cols));
+    put(out, int32_t(d.gray.empty() ? 0 : d.gray[0].rows));
+    for (const cv::Mat& g : d.gray) {
+      const cv::Mat c = g.isContinuous() ? g : g.clone();
+      out.write(reinterpret_cast<const char*>(c.data), std::streamsize(c.total()));
+    }
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(temporary, ignored);
+      return;
+    }
+  }
+  std::error_code error;
+  std::filesystem::rename(temporary, path, error);
+}
+
+bool readCache(const std::string& path, CapturedDive* d) {
+  std::ifstream in(path, std::ios::binary);
+  uint64_t magic = 0;
+  if (!get(in, &magic) || magic != kCacheMagic) return false;
+  std::vector<Eigen::Matrix4d> poses;
+  if (!getVector(in, &d->frame_stamps_s) || !getVector(in, &d->gsd_m) || !getVector(in, &d->vehicle_yaw_rad) ||
+      !getVector(in, &poses) || !getVector(in, &d->imu) || !getVector(in, &d->altitude) ||
+      !getVector(in, &d->dead_reckoning) || !getVector(in, &d->usbl))
+    return false;
+  for (const auto& m : poses) d->world_from_camera.emplace_back(m);
+  int32_t width = 0, height = 0;
+  if (!get(in, &width) || !get(in, &height)) return false;
+  for (size_t i = 0; i < d->frame_stamps_s.size(); ++i) {
+    cv::Mat g(height, width, CV_8UC1);
+    if (!in.read(reinterpret_cast<char*>(g.data), std::streamsize(g.total()))) return false;
+    d->gray.push_back(g);
+  }
+  return !d->gray.empty();
+}
+
+CapturedDive simulate(const sim::DiveDescription& dive, const std::string& cache_dir, int threads) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "fusion_dive_%016llx.bin", static_cast<unsigned long long>(fnv1a(toYaml(dive))));
+  const std::string path = cache_dir + "/" + name;
+  CapturedDive d;
+  if (readCache(path, &d)) {
+    std::cout << "dive: " << d.gray.size() << " frames and navigation from the cache " << path << "\n";
+    return d;
+  }
+  d = CapturedDive();
+  sim::DiveSynthesisConfig config = dive.synthesis;
+  config.threads = threads;
+  sim::Seabed seabed = sim::makeSeabed(dive.seabed, config.seed);
+  sim::DiveSynthesizer synth(config, seabed.texture.get(), seabed.relief.get());
+  sim::DiveSink sink;
+  sink.navigation.imu = [&](const sim::ImuRecord& r) { d.imu.push_back(r); };
+  sink.navigation.altitude = [&](const sim::AltitudeRecord& r) { d.altitude.push_back(r); };
+  sink.navigation.dead_reckoning = [&](const sim::PoseRecord& r) { d.dead_reckoning.push_back(r); };
+  sink.navigation.usbl = [&](const sim::FixRecord& r) { d.usbl.push_back(r); };
+  sink.frame = [&](const sim::FrameTruth& t) {
+    if (t.dropped) return;
+    cv::Mat gray;
+    if (t.frame.image.channels() == 1 && t.frame.image.depth() == CV_8U)
+      gray = t.frame.image.clone();
+    else if (t.frame.image.channels() == 3)
+      cv::cvtColor(t.frame.image, gray, t.frame.encoding == "rgb8" ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+    else
+      t.frame.image.convertTo(gray, CV_8U, t.frame.image.depth() == CV_16U ? 1.0 / 256.0 : 1.0);
+    d.gray.push_back(gray);
+    d.frame_stamps_s.push_back(t.frame.stamp_s);
+    d.world_from_camera.push_back(t.world_from_camera);
+    d.gsd_m.push_back(t.ground_sample_distance_m);
+    d.vehicle_yaw_rad.push_back(t.vehicle.yaw_rad);
+  };
+  const auto start = Clock::now();
+  sink.progress = [&](int done, int total) {
+    if (done % 200 == 0 || done == total)
+      std::cout << "  rendered " << done << "/" << total << " frames, " << secondsSince(start) << " s\n";
+  };
+  synth.run(sink);
+  const double seconds = secondsSince(start);
+  std::cout << "dive: simulated " << d.gray.size() << " frames in " << seconds << " s\n";
+  std::error_code error;
+  std::filesystem::create_directories(cache_dir, error);
+  if (!error) writeCache(path, d);
+  return d;
+}
+
+// ---- Navigation records at a stamp --------------------------------------------------------------------------------
+
+Eigen::Quaterniond attitudeAt(const std::vector<sim::ImuRecord>& imu, double stamp_s) {
+  auto it = std::lower_bound(imu.begin(), imu.end(), stamp_s,
+                             [](const sim::ImuRecord& r, double t) { return r.stamp_s < t; });
+  if (it == imu.end()) return imu.back().orientation;
+  if (it == imu.begin() || it->stamp_s == stamp_s) return it->orientation;
+  const auto prev = it - 1;
+  const double f = (stamp_s - prev->stamp_s) / (it->stamp_s - prev->stamp_s);
+  return prev->orientation.slerp(f, it->orientation);
+}
+
+/// Value at t = 0 of the quadratic fitted to (t_i, y_i), and the variance factor of that value (times the
+/// samples' variance).
+std::pair<double, double> quadraticAtZero(const std::vector<double>& t, const std::vector<double>& y) {
+  const int n = static_cast<int>(t.size());
+  const int degree = n >= 5 ? 2 : (n >= 2 ? 1 : 0);
+  Eigen::MatrixXd A(n, degree + 1);
+  Eigen::VectorXd b(n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j <= degree; ++j) A(i, j) = std::pow(t[i], j);
+    b[i] = y[i];
+  }
+  const Eigen::MatrixXd AtA_inv = (A.transpose() * A).inverse();
+  const Eigen::VectorXd c = AtA_inv * A.transpose() * b;
+  return {c[0], AtA_inv(0, 0)};
+}
+
+/// Attitude at a stamp with roll and pitch smoothed by a quadratic fitted over +-half_window_s of IMU records: their
+/// noise is white (gravity-referenced), and a single record's noise (2 mrad) is 5 mm on the seabed at 2.5 m. The
+/// heading (gyro-integrated, smooth) is the record's own. A centred window: the attitude of an image is known
+/// half_window_s after its stamp.
+Eigen::Quaterniond smoothedAttitude(const std::vector<sim::ImuRecord>& imu, double stamp_s, double half_window_s) {
+  const Eigen::Vector3d at = sim::rpyFromRotation(attitudeAt(imu, stamp_s).toRotationMatrix());
+  auto it = std::lower_bound(imu.begin(), imu.end(), stamp_s - half_window_s - 1e-9,
+                             [](const sim::ImuRecord& r, double t) { return r.stamp_s < t; });
+  std::vector<double> t, roll, pitch;
+  for (; it != imu.end() && it->stamp_s <= stamp_s + half_window_s + 1e-9; ++it) {
+    const Eigen::Vector3d rpy = sim::rpyFromRotation(it->orientation.toRotationMatrix());
+    t.push_back(it->stamp_s - stamp_s);
+    roll.push_back(rpy.x());
+    pitch.push_back(rpy.y());
+  }
+  if (t.empty()) return attitudeAt(imu, stamp_s);
+  return Eigen::Quaterniond(
+      sim::rotationFromRpy(quadraticAtZero(t, roll).first, quadraticAtZero(t, pitch).first, at.z()));
+}
+
+/// Altimeter range at a stamp, a quadratic fitted over +-half_window_s of records (the white noise averaged), with
+/// its 1-sigma from the records' sigma; NaN when no finite record is near.
+std::pair<double, double> smoothedRange(const std::vector<sim::AltitudeRecord>& altitude, double stamp_s,
+                                        double half_window_s) {
+  auto it = std::lower_bound(altitude.begin(), altitude.end(), stamp_s - half_window_s - 1e-9,
+                             [](const sim::AltitudeRecord& r, double t) { return r.stamp_s < t; });
+  std::vector<double> t, range;
+  double sigma = 0.0;
+  for (; it != altitude.end() && it->stamp_s <= stamp_s + half_window_s + 1e-9; ++it) {
+    if (!std::isfinite(it->range_m)) continue;
+    t.push_back(it->stamp_s - stamp_s);
+    range.push_back(it->range_m);
+    sigma = it->sigma_m;
+  }
+  if (t.empty()) return {std::nan(""), std::nan("")};
+  const auto [value, factor] = quadraticAtZero(t, range);
+  return {value, sigma * std::sqrt(factor)};
+}
+
+// ---- Scores -------------------------------------------------------------------------------------------------------
+
+double rmse(const std::vector<Eigen::Vector2d>& estimate, const std::vector<Eigen::Vector2d>& truth,
+            const std::vector<bool>* use = nullptr) {
+  double sum = 0.0;
+  int n = 0;
+  for (size_t i = 0; i < estimate.size(); ++i) {
+    if (use && !(*use)[i]) continue;
+    if (!estimate[i].allFinite()) continue;
+    sum += (estimate[i] - truth[i]).squaredNorm();
+    ++n;
+  }
+  return n ? std::sqrt(sum / n) : std::nan("");
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const size_t i = std::min(v.size() - 1, static_cast<size_t>(std::floor(p * (v.size() - 1) + 0.5)));
+  return v[i];
+}
+
+struct Misalignment {
+  double median_gsd = std::nan(""), p95_gsd = std::nan("");
+};
+
+/// Return pass against the outbound pass: for each (return, nearest outbound) frame pair, the error of the estimated
+/// relative position, in ground sample distances.
+Misalignment misalignment(const std::vector<std::pair<int, int>>& pairs, const std::vector<Eigen::Vector2d>& estimate,
+                          const std::vector<Eigen::Vector2d>& truth, const std::vector<double>& gsd_m) {
+  std::vector<double> values;
+  for (const auto& [ret, out] : pairs) {
+    const Eigen::Vector2d e = (estimate[ret] - estimate[out]) - (truth[ret] - truth[out]);
+    if (e.allFinite()) values.push_back(e.norm() / gsd_m[ret]);
+  }
+  return {percentile(values, 0.5), percentile(values, 0.95)};
+}
+
+struct Json {
+  std::map<std::string, std::string> values;
+  void set(const std::string& key, double v) {
+    std::ostringstream s;
+    if (std::isfinite(v))
+      s << std::setprecision(6) << v;
+    else
+      s << "null";
+    values[key] = s.str();
+  }
+  void setText(const std::string& key, const std::string& v) { values[key] = "\"" + v + "\""; }
+  bool write(const std::string& path) const {
+    std::ofstream out(path);
+    out << "{\n";
+    size_t i = 0;
+    for (const auto& [k, v] : values) out << "  \"" << k << "\": " << v << (++i < values.size() ? ",\n" : "\n");
+    out << "}\n";
+    return bool(out);
+  }
+};
+
+// ---- Cross-pass registration: SIFT + RANSAC homography with its covariance ----------------------------------------
+
+/// A return frame registered to an outbound frame (the vehicle heads the other way: the images are turned by about
+/// 180 degrees, beyond the frame-to-frame registrars' range): SIFT features, ratio test, MAGSAC++ homography, and
+/// the parameter covariance of a Gauss-Newton fit on the inliers (residual variance times (J^T J)^-1).
+struct CrossRegistration {
+  bool found = false;
+  Eigen::VectorXd parameters;  ///< homography, centred on `centre_px` (motion_model.h)
+  Eigen::MatrixXd covariance;
+  Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
+  int matches = 0, inliers = 0;
+  double residual_px = 0.0;
+};
+
+struct SiftFeatures {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+};
+
+SiftFeatures siftFeatures(const cv::Mat& gray) {
+  static cv::Ptr<cv::SIFT> sift = cv::SIFT::create(2500);
+  SiftFeatures f;
+  sift->detectAndCompute(gray, cv::noArray(), f.keypoints, f.descriptors);
+  return f;
+}
+
+CrossRegistration registerAcrossPasses(const SiftFeatures& a, const SiftFeatures& b, int width, int height) {
+  CrossRegistration r;
+  if (a.descriptors.empty() || b.descriptors.empty()) return r;
+  std::vector<std::vector<cv::DMatch>> knn;
+  cv::BFMatcher(cv::NORM_L2).knnMatch(a.descriptors, b.descriptors, knn, 2);
+  std::vector<cv::Point2f> pa, pb;
+  for (const auto& m : knn)
+    if (m.size() == 2 && m[0].distance < 0.8f * m[1].distance) {
+      pa.push_back(a.keypoints[m[0].queryIdx].pt);
+      pb.push_back(b.keypoints[m[0].trainIdx].pt);
+    }
+  r.matches = static_cast<int>(pa.size());
+  if (pa.size() < 30) return r;
+  cv::Mat mask;
+  const cv::Mat h = cv::findHomography(pa, pb, cv::USAC_MAGSAC, 1.0, mask, 10000, 0.9999);
+  if (h.empty()) return r;
+  Eigen::Matrix3d H;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) H(i, j) = h.at<double>(i, j);
+  r.centre_px = Eigen::Vector2d(0.5 * (width - 1), 0.5 * (height - 1));
+  const registration::MotionModel model = registration::MotionModel::kHomography;
+  r.parameters = registration::parametersFromPixelMatrix(model, H, r.centre_px, width, height);
+  Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(8, 8);
+  double sum_sq = 0.0;
+  for (size_t i = 0; i < pa.size(); ++i) {
+    if (!mask.at<uchar>(int(i))) continue;
+    const Eigen::Vector2d xa(pa[i].x, pa[i].y), xb(pb[i].x, pb[i].y);
+    sum_sq += (registration::transferPoint(H, xa) - xb).squaredNorm();
+    const Eigen::MatrixXd J = registration::warpJacobian(model, r.parameters, xa.x() - r.centre_px.x(),
+                                                         xa.y() - r.centre_px.y());
+    jtj += J.transpose() * J;
+    ++r.inliers;
+  }
+  if (r.inliers < 30 || r.inliers < 0.5 * r.matches) return r;
+  const double sigma2 = sum_sq / (2.0 * r.inliers - 8.0);
+  r.residual_px = std::sqrt(sigma2);
+  r.covariance = sigma2 * jtj.inverse();
+  r.found = r.covariance.allFinite();
+  return r;
+}
+
+// ---- Filter runs ----------------------------------------------------------------------------------------------------
+
+struct NavEvent {
+  enum Kind { kImage, kImageFailure, kDeadReckoning, kFix } kind = kImage;
+  double arrival_s = 0.0;
+  double stamp_s = 0.0;
+  double previous_stamp_s = 0.0;
+  int frame = -1;  ///< images: the current frame's index
+  fusion::MetricMotion motion;
+  Eigen::Vector2d value = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity();
+};
+
+struct FilterRun {
+  std::vector<Eigen::Vector2d> filtered;  ///< at each frame, from the final log (each fix at its own stamp)
+  std::vector<Eigen::Matrix2d> filtered_covariance;
+  std::vector<Eigen::Vector2d> live;      ///< at each frame, as known when its image event had been processed
+  std::vector<Eigen::Vector2d> smoothed;
+  std::vector<Eigen::Matrix2d> smoothed_covariance;
+  std::vector<int> frame_step;            ///< index of each frame's step in the log (-1: none)
+  std::vector<fusion::FilterState> smoothed_states;
+  int events = 0;
+  double filter_seconds = 0.0, smoother_seconds = 0.0;
+  int fixes_rejected_at_arrival = 0, fixes_rejected_final = 0, fixes_applied_final = 0, recoveries = 0;
+  long rewinds = 0;
+  fusion::FilterState last;
+  fusion::FilterLog log;
+};
+
+FilterRun runFilter(const fusion::FilterConfig& config, const std::vector<NavEvent>& events, bool images, bool nav,
+                    double t0_s, const Eigen::Vector2d& p0, const Eigen::Matrix2d& P0,
+                    const std::vector<double>& frame_stamps) {
+  FilterRun run;
+  const size_t n = frame_stamps.size();
+  const Eigen::Vector2d nan2(std::nan(""), std::nan(""));
+  run.live.assign(n, nan2);
+  fusion::NavigationFilter filter(config);
+  filter.initialize(t0_s, p0, P0);
+  const auto step_at = [&](double stamp) -> const fusion::FilterStep* {
+    const auto& steps = filter.log().steps;
+    auto it = std::lower_bound(steps.begin(), steps.end(), stamp,
+                               [](const fusion::FilterStep& s, double t) { return s.stamp_s < t; });
+    return it != steps.end() && it->stamp_s == stamp ? &*it : nullptr;
+  };
+  const auto start = Clock::now();
+  for (const NavEvent& e : events) {
+    fusion::UpdateResult r;
+    if (e.kind == NavEvent::kImage || e.kind == NavEvent::kImageFailure) {
+      if (!images) continue;
+      r = e.kind == NavEvent::kImage ? filter.addImageMotion(e.previous_stamp_s, e.stamp_s, e.motion)
+                                     : filter.addImageFailure(e.previous_stamp_s, e.stamp_s);
+      if (const fusion::FilterStep* s = step_at(e.stamp_s)) run.live[e.frame] = s->x_posterior.head<2>();
+    } else if (e.kind == NavEvent::kDeadReckoning) {
+      if (!nav) continue;
+      r = filter.addDeadReckoning(e.stamp_s, e.value, e.covariance);
+    } else {
+      if (!nav) continue;
+      r = filter.addAbsoluteFix(e.stamp_s, e.value, e.covariance);
+      run.fixes_rejected_at_arrival += r.status == fusion::UpdateStatus::kRejectedByGate;
+    }
+    ++run.events;
+    if (r.status == fusion::UpdateStatus::kInvalid || r.status == fusion::UpdateStatus::kNotInitialized)
+      std::cout << "  event at " << std::fixed << std::setprecision(3) << e.stamp_s << std::defaultfloat << ": "
+                << fusion::toString(r.status) << " " << r.detail << "\n";
+  }
+  run.filter_seconds = secondsSince(start);
+  const auto smoother_start = Clock::now();
+  run.smoothed_states = fusion::smoothRts(filter.log());
+  run.smoother_seconds = secondsSince(smoother_start);
+  run.filtered.assign(n, nan2);
+  run.smoothed.assign(n, nan2);
+  run.filtered_covariance.assign(n, Eigen::Matrix2d::Identity());
+  run.smoothed_covariance.assign(n, Eigen::Matrix2d::Identity());
+  run.frame_step.assign(n, -1);
+  const auto& steps = filter.log().steps;
+  size_t k = 0;
+  for (size_t i = 0; i < steps.size(); ++i) {
+    run.fixes_rejected_final += steps[i].fixes_rejected;
+    run.fixes_applied_final += steps[i].fixes_applied;
+    while (k < n && frame_stamps[k] < steps[i].stamp_s) ++k;
+    if (k < n && frame_stamps[k] == steps[i].stamp_s) {
+      run.filtered[k] = steps[i].x_posterior.head<2>();
+      run.filtered_covariance[k] = steps[i].P_posterior.block<2, 2>(0, 0);
+      run.smoothed[k] = run.smoothed_states[i].position_en_m;
+      run.smoothed_covariance[k] = run.smoothed_states[i].position_covariance_m2;
+      run.frame_step[k] = static_cast<int>(i);
+    }
+  }
+  run.recoveries = static_cast<int>(filter.counters().recoveries);
+  run.rewinds = filter.counters().rewinds;
+  run.last = filter.current();
+  run.log = filter.log();
+  return run;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string out_dir = "out/bench", shared = "../shared/data", config_dir = EXOCET_CONFIG_DIR;
+  std::string dive_yaml = config_dir + "/dives/bench_fusion.yaml";
+  bool cross_pass = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--output-dir" && i + 1 < argc) out_dir = argv[++i];
+    else if (a == "--shared-data" && i + 1 < argc) shared = argv[++i];
+    else if (a == "--dive" && i + 1 < argc) dive_yaml = argv[++i];
+    else if (a == "--no-cross-pass") cross_pass = false;
+    else {
+      std::cerr << "usage: bench_fusion [--output-dir DIR] [--shared-data DIR] [--dive YAML] [--no-cross-pass]\n";
+      return 2;
+    }
+  }
+  cv::setNumThreads(1);
+  std::cout << std::unitbuf;
+  Json json;
+  const auto bench_start = Clock::now();
+
+  // ---- 1. The dive ----
+  const sim::DiveDescription dive = sim::loadDiveDescription(dive_yaml, {});
+  const sim::CameraRig& rig = dive.synthesis.rig;
+  const CapturedDive d = simulate(dive, out_dir + "/cache", 2);
+  const size_t n = d.gray.size();
+  const fusion::UtmGrid grid = fusion::UtmGrid::forLatLon(dive.origin_latitude_deg, dive.origin_longitude_deg);
+  std::vector<Eigen::Vector2d> truth(n);
+  for (size_t k = 0; k < n; ++k) truth[k] = d.world_from_camera[k].translation().head<2>();
+  const double t0 = d.frame_stamps_s.front();
+  double path_m = 0.0;
+  for (size_t k = 1; k < n; ++k) path_m += (truth[k] - truth[k - 1]).norm();
+  std::cout << "dive: " << n << " frames over " << d.frame_stamps_s.back() - t0 << " s, camera path " << path_m
+            << " m, grid " << grid.name() << " (EPSG " << grid.epsg() << "), " << d.usbl.size() << " USBL fixes, "
+            << d.dead_reckoning.size() << " DR records\n";
+
+  // ---- 2. Registration of consecutive frames ----
+  registration::RegistrationConfig reg_config;
+  reg_config.method = registration::RegistrationMethod::kAuto;
+  reg_config.model = registration::MotionModel::kHomography;
+  std::unique_ptr<registration::FrameRegistrar> registrar = registration::makeRegistrar(reg_config);
+  std::vector<registration::MotionEstimate> estimates(n);
+  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
+  auto t_start = Clock::now();
+  int registration_failures = 0;
+  for (size_t k = 0; k < n; ++k) {
+    estimates[k] = registrar->registerNext(d.gray[k], prediction);
+    prediction = estimates[k].failed ? Eigen::Matrix3d::Identity() : estimates[k].pixel_matrix;
+    if (k > 0 && estimates[k].failed) ++registration_failures;
+  }
+  const double registration_s = secondsSince(t_start);
+  std::cout << "registration: " << n - 1 << " pairs in " << registration_s << " s (" << (n - 1) / registration_s
+            << " pairs/s), " << registration_failures << " failed\n";
+
+  // ---- 3. Metric conversion ----
+  fusion::CameraMount mount;
+  mount.camera_matrix << rig.camera.fx, 0.0, rig.camera.cx, 0.0, rig.camera.fy, rig.camera.cy, 0.0, 0.0, 1.0;
+  mount.base_from_camera = rig.baseFromCamera();
+  const Eigen::Vector3d altimeter_in_base = Eigen::Vector3d::Zero();  // the simulator's altimeter sits at base_link
+  // Roll, pitch and altimeter range smoothed over +-1 s around each image (their noise is white): an image's view
+  // is known 1 s after its stamp, so its motion reaches the filter then (the filter re-processes the DR it has
+  // received in between).
+  const double view_window_s = 1.0;
+  std::vector<fusion::ViewGeometry> views(n);
+  for (size_t k = 0; k < n; ++k) {
+    views[k].world_from_base = smoothedAttitude(d.imu, d.frame_stamps_s[k], view_window_s);
+    const auto [range, range_sigma] = smoothedRange(d.altitude, d.frame_stamps_s[k], view_window_s);
+    views[k].camera_height_m = fusion::cameraHeightFromAltimeter_m(range, views[k].world_from_base, altimeter_in_base,
+                                                                   rig.lever_arm_m);
+    views[k].camera_height_sigma_m = range_sigma;
+  }
+  std::vector<fusion::MetricMotion> motions(n);
+  double metric_error_sum = 0.0;
+  int metric_count = 0;
+  for (size_t k = 1; k < n; ++k) {
+    const registration::MotionEstimate& e = estimates[k];
+    if (e.failed) continue;
+    motions[k] = fusion::toMetricMotion(e.model, e.parameters, e.covariance, e.centre_px, mount, views[k - 1], views[k]);
+    if (!motions[k].valid) {
+      std::cout << "  metric conversion of pair " << k << " failed: " << motions[k].error << "\n";
+      continue;
+    }
+    metric_error_sum += (motions[k].camera_displacement_en_m - (truth[k] - truth[k - 1])).squaredNorm();
+    ++metric_count;
+  }
+  const double metric_step_rmse_m = std::sqrt(metric_error_sum / std::max(1, metric_count));
+  std::cout << "metric motion: per-pair displacement RMSE " << 1000.0 * metric_step_rmse_m << " mm over "
+            << metric_count << " pairs\n";
+
+  // ---- 4. Sources, in arrival order ----
+  std::vector<NavEvent> events;
+  const double image_latency_s = view_window_s + 0.03;  // the views' window, then the registration
+  for (size_t k = 1; k < n; ++k) {
+    NavEvent e;
+    e.kind = motions[k].valid ? NavEvent::kImage : NavEvent::kImageFailure;
+    e.stamp_s = d.frame_stamps_s[k];
+    e.previous_stamp_s = d.frame_stamps_s[k - 1];
+    e.arrival_s = e.stamp_s + image_latency_s;
+    e.frame = static_cast<int>(k);
+    e.motion = motions[k];
+    events.push_back(e);
+  }
+  const auto camera_en = [&](const Eigen::Vector3d& base, const Eigen::Quaterniond& q) {
+    return fusion::cameraPosition(base, q, mount.base_from_camera).head<2>().eval();
+  };
+  std::map<double, Eigen::Vector2d> dr_at;  // DR camera centre by stamp
+  for (const sim::PoseRecord& r : d.dead_reckoning) {
+    if (r.stamp_s < t0) continue;
+    NavEvent e;
+    e.kind = NavEvent::kDeadReckoning;
+    e.stamp_s = e.arrival_s = r.stamp_s;
+    e.value = camera_en(r.position_m, r.orientation);
+    e.covariance = r.pose_covariance.block<2, 2>(0, 0);
+    dr_at[r.stamp_s] = e.value;
+    events.push_back(e);
+  }
+  std::vector<double> usbl_errors;
+  int usbl_outliers = 0;
+  const double usbl_sigma = dive.synthesis.navigation.usbl_noise_m;
+  for (const sim::FixRecord& f : d.usbl) {
+    if (f.stamp_s <= t0) continue;
+    const Eigen::Vector2d base_en = grid.toGrid(f.latitude_deg, f.longitude_deg);
+    const Eigen::Vector3d base(base_en.x(), base_en.y(), f.altitude_m);
+    NavEvent e;
+    e.kind = NavEvent::kFix;
+    e.stamp_s = f.stamp_s;
+    e.arrival_s = f.arrival_s;
+    e.value = camera_en(base, attitudeAt(d.imu, f.stamp_s));
+    e.covariance = f.horizontal_sigma_m * f.horizontal_sigma_m * Eigen::Matrix2d::Identity();
+    events.push_back(e);
+    // Against the truth at the fix's stamp (a frame stamp: fixes at whole seconds, frames at 5 Hz).
+    auto it = std::lower_bound(d.frame_stamps_s.begin(), d.frame_stamps_s.end(), f.stamp_s);
+    if (it != d.frame_stamps_s.end() && *it == f.stamp_s) {
+      const double error = (e.value - truth[it - d.frame_stamps_s.begin()]).norm();
+      usbl_errors.push_back(error);
+      usbl_outliers += error > 4.0 * usbl_sigma;
+    }
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const NavEvent& a, const NavEvent& b) { return a.arrival_s < b.arrival_s; });
+
+  // ---- 5. Single sources ----
+  // Image motion alone from the true first position (a failed pair keeps the previous pair's motion).
+  std::vector<Eigen::Vector2d> image_only(n);
+  image_only[0] = truth[0];
+  Eigen::Vector2d last_motion = Eigen::Vector2d::Zero();
+  for (size_t k = 1; k < n; ++k) {
+    if (motions[k].valid) last_motion = motions[k].camera_displacement_en_m;
+    image_only[k] = image_only[k - 1] + last_motion;
+  }
+  std::vector<Eigen::Vector2d> nav_only(n, Eigen::Vector2d(std::nan(""), std::nan("")));
+  for (size_t k = 0; k < n; ++k) {
+    auto it = dr_at.find(d.frame_stamps_s[k]);
+    if (it != dr_at.end()) nav_only[k] = it->second;
+  }
+  double usbl_sq = 0.0, usbl_inlier_sq = 0.0;
+  int usbl_inliers = 0;
+  for (double e : usbl_errors) {
+    usbl_sq += e * e;
+    if (e <= 4.0 * usbl_sigma) {
+      usbl_inlier_sq += e * e;
+      ++usbl_inliers;
+    }
+  }
+  const double rmse_usbl = std::sqrt(usbl_sq / usbl_errors.size());
+  const double rmse_usbl_inliers = std::sqrt(usbl_inlier_sq / std::max(1, usbl_inliers));
+
+  // ---- 6. The filter: DR + USBL only, then all sources; RTS over the whole dive ----
+  fusion::FilterConfig config;
+  // Initial state: the first DR position (the vehicle's navigation starts at the launch point) with its covariance.
+  const Eigen::Vector2d p0 = dr_at.count(t0) ? dr_at[t0] : truth[0];
+  Eigen::Matrix2d P0 = d.dead_reckoning.front().pose_covariance.block<2, 2>(0, 0);
+  for (const sim::PoseRecord& r : d.dead_reckoning)
+    if (r.stamp_s == t0) P0 = r.pose_covariance.block<2, 2>(0, 0);
+  const FilterRun nav_run = runFilter(config, events, false, true, t0, p0, P0, d.frame_stamps_s);
+  const FilterRun all = runFilter(config, events, true, true, t0, p0, P0, d.frame_stamps_s);
+
+  // ---- 7. Scores ----
+  const double rmse_image_only = rmse(image_only, truth);
+  const double rmse_nav_only = rmse(nav_only, truth);
+  const double rmse_nav_filter = rmse(nav_run.filtered, truth);
+  const double rmse_nav_smoothed = rmse(nav_run.smoothed, truth);
+  const double rmse_filtered = rmse(all.filtered, truth);
+  const double rmse_live = rmse(all.live, truth);
+  const double rmse_smoothed = rmse(all.smoothed, truth);
+  int nees_in = 0, nees_below = 0, nees_above = 0, nees_count = 0;
+  double nees_sum = 0.0, smoothed_nees_sum = 0.0;
+  for (size_t k = 0; k < n; ++k) {
+    if (all.frame_step[k] < 0) continue;
+    const Eigen::Vector2d e = all.filtered[k] - truth[k];
+    const double nees = e.dot(all.filtered_covariance[k].ldlt().solve(e));
+    const Eigen::Vector2d es = all.smoothed[k] - truth[k];
+    smoothed_nees_sum += es.dot(all.smoothed_covariance[k].ldlt().solve(es));
+    nees_sum += nees;
+    nees_in += nees >= 0.0506 && nees <= 7.38;
+    nees_below += nees < 0.0506;
+    nees_above += nees > 7.38;
+    ++nees_count;
+  }
+
+  // Outbound and return passes: heading within 10 deg of the line's, or of its reverse; the turn is left out.
+  const double line_yaw = M_PI / 2 - dive.synthesis.trajectory.heading_deg * M_PI / 180.0;
+  const auto angle_to = [](double a, double b) { return std::abs(std::remainder(a - b, 2.0 * M_PI)); };
+  std::vector<int> outbound, returning;
+  bool turned = false;
+  for (size_t k = 0; k < n; ++k) {
+    if (angle_to(d.vehicle_yaw_rad[k], line_yaw) > 10.0 * M_PI / 180.0) turned = true;
+    if (!turned && angle_to(d.vehicle_yaw_rad[k], line_yaw) < 10.0 * M_PI / 180.0) outbound.push_back(int(k));
+    if (turned && angle_to(d.vehicle_yaw_rad[k], line_yaw + M_PI) < 10.0 * M_PI / 180.0) returning.push_back(int(k));
+  }
+  std::vector<std::pair<int, int>> pass_pairs;  // (return frame, nearest outbound frame)
+  for (int r : returning) {
+    int best = -1;
+    double best_d = 1e300;
+    for (int o : outbound) {
+      const double dist = (truth[r] - truth[o]).norm();
+      if (dist < best_d) best_d = dist, best = o;
+    }
+    if (best >= 0 && best_d < 0.5) pass_pairs.emplace_back(r, best);
+  }
+  const Misalignment mis_filtered = misalignment(pass_pairs, all.filtered, truth, d.gsd_m);
+  const Misalignment mis_smoothed = misalignment(pass_pairs, all.smoothed, truth, d.gsd_m);
+  const Misalignment mis_image_only = misalignment(pass_pairs, image_only, truth, d.gsd_m);
+  const Misalignment mis_nav_only = misalignment(pass_pairs, nav_only, truth, d.gsd_m);
+  double gsd_mean = 0.0;
+  for (double g : d.gsd_m) gsd_mean += g / n;
+
+  // ---- 8. Cross-pass image constraints in a batch smoother ----
+  Misalignment mis_cross;
+  double rmse_cross = std::nan("");
+  int cross_constraints = 0, cross_attempts = 0;
+  double cross_seconds = 0.0;
+  if (cross_pass) {
+    const auto cross_start = Clock::now();
+    std::vector<fusion::RelativeConstraint> cross;
+    std::vector<double> residuals_px, constraint_errors_m;
+    for (size_t i = 0; i < pass_pairs.size(); i += 5) {  // one return frame a second
+      const auto [ret, out] = pass_pairs[i];
+      ++cross_attempts;
+      const CrossRegistration reg =
+          registerAcrossPasses(siftFeatures(d.gray[out]), siftFeatures(d.gray[ret]), d.gray[ret].cols, d.gray[ret].rows);
+      if (!reg.found) continue;
+      const fusion::MetricMotion m = fusion::toMetricMotion(registration::MotionModel::kHomography, reg.parameters,
+                                                            reg.covariance, reg.centre_px, mount, views[out], views[ret]);
+      if (!m.valid) continue;
+      fusion::RelativeConstraint c;
+      c.from_stamp_s = d.frame_stamps_s[out];
+      c.to_stamp_s = d.frame_stamps_s[ret];
+      c.delta_en_m = m.camera_displacement_en_m;
+      c.covariance_m2 = m.covariance_m2;
+      cross.push_back(c);
+      residuals_px.push_back(reg.residual_px);
+      constraint_errors_m.push_back((m.camera_displacement_en_m - (truth[ret] - truth[out])).norm());
+    }
+    std::cout << "cross-pass registration: median inlier residual " << percentile(residuals_px, 0.5)
+              << " px, constraint error median " << 1000.0 * percentile(constraint_errors_m, 0.5) << " mm, p95 "
+              << 1000.0 * percentile(constraint_errors_m, 0.95) << " mm\n";
+    json.set("cross_pass_constraint_error_median_m", percentile(constraint_errors_m, 0.5));
+    cross_constraints = static_cast<int>(cross.size());
+    std::vector<fusion::AbsoluteConstraint> fixes;
+    for (const NavEvent& e : events)
+      if (e.kind == NavEvent::kFix) fixes.push_back({e.stamp_s, e.value, e.covariance});
+    const fusion::CrossPassResult result =
+        fusion::smoothWithCrossPassConstraints(all.log, all.smoothed_states, fixes, cross);
+    cross_seconds = secondsSince(cross_start);
+    std::vector<Eigen::Vector2d> cross_track(n, Eigen::Vector2d(std::nan(""), std::nan("")));
+    for (size_t k = 0; k < n; ++k)
+      if (all.frame_step[k] >= 0) cross_track[k] = result.positions_en_m[all.frame_step[k]];
+    mis_cross = misalignment(pass_pairs, cross_track, truth, d.gsd_m);
+    rmse_cross = rmse(cross_track, truth);
+    std::cout << "cross-pass: " << cross_constraints << " constraints from " << cross_attempts << " pairs, "
+              << result.iterations << " iterations, " << cross_seconds << " s; " << result.message << "\n";
+  }
+
+  // ---- 9. Table ----
+  const double true_heading_error_end = std::remainder(
+      sim::rpyFromRotation(attitudeAt(d.imu, d.frame_stamps_s.back()).toRotationMatrix()).z() -
+          d.vehicle_yaw_rad.back(),
+      2.0 * M_PI);
+  const double better_single = std::min(rmse_nav_only, rmse_usbl);
+  const double updates_per_s = all.events / all.filter_seconds;
+  std::cout << "\nFusion, out-and-back over " << path_m << " m (" << n << " PAL frames at "
+            << rig.fps << " fps, mean GSD " << 1000.0 * gsd_mean << " mm), against the true camera centre:\n"
+            << std::left << std::setw(44) << "track" << std::right << std::setw(11) << "RMSE m" << std::setw(15)
+            << "return med GSD" << std::setw(15) << "return p95 GSD" << "\n";
+  const auto row = [](const std::string& name, double r, const Misalignment& m) {
+    std::ostringstream line;
+    line << std::left << std::setw(44) << name << std::right << std::fixed << std::setprecision(3) << std::setw(11)
+         << r << std::setprecision(1) << std::setw(15) << m.median_gsd << std::setw(15) << m.p95_gsd << "\n";
+    std::cout << line.str();
+  };
+  row("image motion alone (from the true start)", rmse_image_only, mis_image_only);
+  row("dead reckoning (vehicle navigation)", rmse_nav_only, mis_nav_only);
+  row("USBL fixes (all, at their stamps)", rmse_usbl, Misalignment());
+  row("USBL fixes (without the outliers > 4 sigma)", rmse_usbl_inliers, Misalignment());
+  row("filter: DR + USBL", rmse_nav_filter, misalignment(pass_pairs, nav_run.filtered, truth, d.gsd_m));
+  row("RTS: DR + USBL", rmse_nav_smoothed, misalignment(pass_pairs, nav_run.smoothed, truth, d.gsd_m));
+  row("filter: all sources (fixes at their stamps)", rmse_filtered, mis_filtered);
+  row("filter: all sources, live (before late fixes)", rmse_live, misalignment(pass_pairs, all.live, truth, d.gsd_m));
+  row("RTS smoother: all sources", rmse_smoothed, mis_smoothed);
+  if (cross_pass) row("RTS + cross-pass constraints (Ceres)", rmse_cross, mis_cross);
+  std::cout << "filtered / better single source: " << rmse_filtered / better_single << " (goal <= 0.5)\n"
+            << "NEES (filter, position, 2 dof): mean " << nees_sum / nees_count << ", "
+            << 100.0 * nees_in / nees_count << " % of " << nees_count << " epochs in [0.0506, 7.38] ("
+            << 100.0 * nees_below / nees_count << " % below, " << 100.0 * nees_above / nees_count
+            << " % above); smoothed mean " << smoothed_nees_sum / nees_count << "\n"
+            << "fixes: " << usbl_errors.size() << " (" << usbl_outliers << " outliers > 4 sigma), gated "
+            << all.fixes_rejected_final << " (at arrival " << all.fixes_rejected_at_arrival << "), recoveries "
+            << all.recoveries << "\n"
+            << "heading error of the IMU at the end " << true_heading_error_end << " rad (truth); estimated "
+            << all.last.heading_error_rad << " +- "
+            << all.last.heading_error_sigma_rad << " rad, pixel-size correction " << all.last.pixel_size_correction
+            << " +- " << all.last.pixel_size_correction_sigma << "\n"
+            << "filter: " << all.events << " events in " << all.filter_seconds << " s (" << updates_per_s
+            << " updates/s, " << all.rewinds << " rewinds); RTS over " << all.smoothed_states.size() << " steps in "
+            << all.smoother_seconds << " s\n";
+
+  json.set("frames", double(n));
+  json.set("path_length_m", path_m);
+  json.set("mean_gsd_m", gsd_mean);
+  json.set("registration_failures", registration_failures);
+  json.set("registration_pairs_per_s", (n - 1) / registration_s);
+  json.set("metric_step_rmse_m", metric_step_rmse_m);
+  json.set("rmse_image_only_m", rmse_image_only);
+  json.set("rmse_nav_only_m", rmse_nav_only);
+  json.set("rmse_usbl_only_m", rmse_usbl);
+  json.set("rmse_usbl_only_inliers_m", rmse_usbl_inliers);
+  json.set("rmse_nav_filter_m", rmse_nav_filter);
+  json.set("rmse_nav_smoothed_m", rmse_nav_smoothed);
+  json.set("rmse_filtered_m", rmse_filtered);
+  json.set("rmse_filtered_live_m", rmse_live);
+  json.set("rmse_smoothed_m", rmse_smoothed);
+  json.set("filtered_over_better_single_source", rmse_filtered / better_single);
+  json.set("return_misalignment_gsd_filtered_median", mis_filtered.median_gsd);
+  json.set("return_misalignment_gsd_filtered_p95", mis_filtered.p95_gsd);
+  json.set("return_misalignment_gsd_smoothed_median", mis_smoothed.median_gsd);
+  json.set("return_misalignment_gsd_smoothed_p95", mis_smoothed.p95_gsd);
+  json.set("return_misalignment_gsd_image_only_median", mis_image_only.median_gsd);
+  json.set("return_misalignment_gsd_nav_only_median", mis_nav_only.median_gsd);
+  json.set("return_pairs", double(pass_pairs.size()));
+  if (cross_pass) {
+    json.set("return_misalignment_gsd_cross_pass_median", mis_cross.median_gsd);
+    json.set("return_misalignment_gsd_cross_pass_p95", mis_cross.p95_gsd);
+    json.set("rmse_cross_pass_m", rmse_cross);
+    json.set("cross_pass_constraints", cross_constraints);
+    json.set("cross_pass_seconds", cross_seconds);
+  }
+  json.set("nees_in_bounds_fraction", double(nees_in) / nees_count);
+  json.set("nees_mean", nees_sum / nees_count);
+  json.set("nees_below_fraction", double(nees_below) / nees_count);
+  json.set("nees_above_fraction", double(nees_above) / nees_count);
+  json.set("true_heading_error_end_rad", true_heading_error_end);
+  json.set("estimated_heading_error_end_rad", all.last.heading_error_rad);
+  json.set("estimated_heading_error_end_sigma_rad", all.last.heading_error_sigma_rad);
+  json.set("nees_smoothed_mean", smoothed_nees_sum / nees_count);
+  json.set("usbl_fixes", double(usbl_errors.size()));
+  json.set("usbl_outliers", usbl_outliers);
+  json.set("gated_fixes", all.fixes_rejected_final);
+  json.set("gated_fixes_at_arrival", all.fixes_rejected_at_arrival);
+  json.set("recoveries", all.recoveries);
+  json.set("filter_events", all.events);
+  json.set("filter_updates_per_s", updates_per_s);
+  json.set("filter_rewinds", double(all.rewinds));
+  json.set("rts_seconds", all.smoother_seconds);
+  json.set("bench_seconds", secondsSince(bench_start));
+  std::error_code error;
+  std::filesystem::create_directories(out_dir, error);
+  const std::string path = out_dir + "/fusion.json";
+  if (!json.write(path)) {
+    std::cerr << "bench_fusion: cannot write " << path << "\n";
+    return 1;
+  }
+  std::cout << "wrote " << path << " (" << secondsSince(bench_start) << " s)\n";
+  return 0;
+}
