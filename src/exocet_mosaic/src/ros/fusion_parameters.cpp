@@ -19,12 +19,12 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
                        "position random walk where no image motion covers the time (m^2/s)");
   p.readDouble("no_motion_speed_mps", &f->no_motion_speed_mps, 0.0, 20.0,
                "assumed speed for the dead-reckoning offset growth without image motion (m/s)");
-  p.readDouble("initial_pixel_size_correction_sigma", &f->initial_pixel_size_correction_sigma, 0.0, 1.0,
+  p.readDouble("initial_pixel_size_correction_sigma", &f->initial_pixel_size_correction_sigma, 0.0, 0.49,
                "1-sigma of the pixel-size correction at the start (relative)");
   p.readDouble("pixel_size_correction_noise_per_sqrt_s", &f->pixel_size_correction_noise_per_sqrt_s, 0.0, 1.0,
                "random walk of the pixel-size correction (1/sqrt(s))");
-  p.readDouble("initial_heading_sigma_rad", &f->initial_heading_sigma_rad, 0.0, 3.2,
-               "1-sigma of the attitude's heading error at the start (rad)");
+  p.readDouble("initial_heading_sigma_rad", &f->initial_heading_sigma_rad, 0.0, 0.5,
+               "1-sigma of the attitude's heading error at the start (rad; the filter linearises in it)");
   p.readDouble("initial_heading_drift_sigma_rps", &f->initial_heading_drift_sigma_rps, 0.0, 1.0,
                "1-sigma of the gyro bias at the start (rad/s)");
   p.readDouble("heading_noise_rad_per_sqrt_s", &f->heading_noise_rad_per_sqrt_s, 0.0, 1.0,
@@ -71,7 +71,9 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                              std::make_pair("path_topic", &c.path_topic),
                              std::make_pair("navigation_path_topic", &c.navigation_path_topic),
                              std::make_pair("image_path_topic", &c.image_path_topic),
-                             std::make_pair("smoothed_path_topic", &c.smoothed_path_topic)}) {
+                             std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
+                             std::make_pair("camera_height_topic", &c.camera_height_topic),
+                             std::make_pair("datum_out_topic", &c.datum_out_topic)}) {
     params.readTopic(name, topic);
   }
   if (!c.odometry_topic.empty() && !c.nav_fix_topic.empty())

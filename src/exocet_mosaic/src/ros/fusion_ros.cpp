@@ -76,6 +76,9 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   nav_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.navigation_path_topic, 1, true);
   image_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.image_path_topic, 1, true);
   smoothed_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.smoothed_path_topic, 1, true);
+  if (!config_.camera_height_topic.empty())
+    camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
+  if (!config_.datum_out_topic.empty()) datum_pub_ = nh_.advertise<exocet_msgs::GeoDatum>(config_.datum_out_topic, 1, true);
   initial_pose_srv_ = private_nh_.advertiseService("set_initial_pose", &FusionRos::onSetInitialPose, this);
   smooth_srv_ = private_nh_.advertiseService("smooth", &FusionRos::onSmooth, this);
   for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->header.frame_id = config_.map_frame;
@@ -664,6 +667,19 @@ void FusionRos::publishState(const ros::Time& stamp) {
   c[21] = c[28] = c[35] = attitude_variance;
   odometry_pub_.publish(odometry);
   appendPath(&fused_path_, stamp, s.position_en_m);
+  publishDatum();
+  if (camera_height_pub_ && attitude && camera) {
+    if (const auto height_m = cameraHeightAt(stamp.toSec(), *attitude, *camera)) {
+      sensor_msgs::Range range;
+      range.header.stamp = stamp;
+      range.header.frame_id = camera_frame_.empty() ? config_.camera_frame : camera_frame_;
+      range.radiation_type = sensor_msgs::Range::ULTRASOUND;
+      range.min_range = 0.0f;
+      range.max_range = 1000.0f;
+      range.range = static_cast<float>(*height_m);  // vertical height of the camera above the seabed (m)
+      camera_height_pub_.publish(range);
+    }
+  }
 
   if (config_.publish_tf && map_origin_en_m_) {
     geometry_msgs::TransformStamped t;
@@ -675,6 +691,28 @@ void FusionRos::publishState(const ros::Time& stamp) {
     t.transform.rotation = odometry.pose.pose.orientation;
     tf_broadcaster_.sendTransform(t);
   }
+}
+
+void FusionRos::publishDatum() {
+  if (!datum_pub_ || !grid_) return;
+  const int key = grid_->zone() * 2 + (grid_->northern() ? 1 : 0);
+  if (key == published_datum_zone_ && published_datum_has_origin_ == map_origin_en_m_.has_value()) return;
+  exocet_msgs::GeoDatum datum;
+  datum.header.stamp = ros::Time::now();
+  datum.frame_id = config_.utm_frame;
+  datum.utm_zone = grid_->zone();
+  datum.northern_hemisphere = grid_->northern();
+  datum.epsg = grid_->epsg();
+  if (map_origin_en_m_) {
+    datum.origin_easting_m = map_origin_en_m_->x();
+    datum.origin_northing_m = map_origin_en_m_->y();
+    const Eigen::Vector2d lat_lon = grid_->toLatLon(map_origin_en_m_->x(), map_origin_en_m_->y());
+    datum.origin_latitude_deg = lat_lon.x();
+    datum.origin_longitude_deg = lat_lon.y();
+  }
+  datum_pub_.publish(datum);
+  published_datum_zone_ = key;
+  published_datum_has_origin_ = map_origin_en_m_.has_value();
 }
 
 void FusionRos::publishPaths() {

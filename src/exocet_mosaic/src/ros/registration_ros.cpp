@@ -11,6 +11,7 @@
 #include <exocet_msgs/ImageMotion.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_mosaic/ros/image_message_decoder.h"
 #include "exocet_mosaic/ros/parameter_reader.h"
 #include "exocet_mosaic/ros/registration_parameters.h"
 
@@ -100,42 +101,13 @@ void RegistrationRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
 
 void RegistrationRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg) {
   if (!acceptTransport("compressed")) return;
-  cv::Mat decoded;
-  try {
-    decoded = cv::imdecode(msg->data, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    decoded.release();
-  }
-  if (decoded.empty()) {
-    reject("compressed image (format '" + msg->format + "', " + std::to_string(msg->data.size()) +
-           " bytes) cannot be decoded");
+  DecodedImage decoded;
+  const std::string error = decodeCompressedImage(*msg, &decoded);
+  if (!error.empty()) {
+    reject(error);
     return;
   }
-  // The format field starts with the original encoding ("bgr8; jpeg compressed bgr8"); a Bayer image compressed
-  // losslessly decodes to one channel and must be demosaiced as such.
-  std::string encoding = msg->format.substr(0, msg->format.find(';'));
-  encoding.erase(std::remove(encoding.begin(), encoding.end(), ' '), encoding.end());
-  const bool bayer = encoding.rfind("bayer_", 0) == 0 && decoded.channels() == 1;
-  if (!bayer) {
-    switch (decoded.type()) {
-      case CV_8UC1:
-        encoding = "mono8";
-        break;
-      case CV_16UC1:
-        encoding = "mono16";
-        break;
-      case CV_8UC3:
-        encoding = "bgr8";  // imdecode's order
-        break;
-      case CV_8UC4:
-        encoding = "bgra8";
-        break;
-      default:
-        reject("compressed image (format '" + msg->format + "') decodes to an unsupported pixel type");
-        return;
-    }
-  }
-  process(decoded, encoding, msg->header);
+  process(decoded.image, decoded.encoding, msg->header);
 }
 
 void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {

@@ -61,6 +61,9 @@ struct FusionNodeConfig {
   std::string navigation_path_topic = "/mosaic/path_navigation";  ///< dead reckoning as received
   std::string image_path_topic = "/mosaic/path_image";          ///< image motion alone from the first position
   std::string smoothed_path_topic = "/mosaic/path_smoothed";    ///< RTS smoother, on ~smooth
+  /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
+  std::string camera_height_topic = "/mosaic/camera_height";
+  std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs
   double path_rate_hz = 1.0;           ///< paths are republished at this rate (0, 100]
   int max_path_poses = 20000;          ///< beyond, every other pose is dropped (bounded memory) [100, 1e7]
   bool keep_smoother_log = true;       ///< keep the whole dive for the RTS smoother (memory grows with the dive)

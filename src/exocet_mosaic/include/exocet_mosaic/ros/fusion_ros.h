@@ -105,6 +105,8 @@ class FusionRos {
 
   // Outputs.
   void publishState(const ros::Time& stamp);
+  /// Publishes the UTM zone in use (latched) when it is first known or changes.
+  void publishDatum();
   void appendPath(nav_msgs::Path* path, const ros::Time& stamp, const Eigen::Vector2d& en_m);
   void publishPaths();
   void ensureMapOrigin(const Eigen::Vector2d& en_m);
@@ -119,6 +121,9 @@ class FusionRos {
       datum_sub_;
   ros::ServiceServer initial_pose_srv_, smooth_srv_;
   ros::Publisher odometry_pub_, fused_path_pub_, nav_path_pub_, image_path_pub_, smoothed_path_pub_;
+  ros::Publisher camera_height_pub_, datum_pub_;
+  int published_datum_zone_ = -1;  ///< zone * 2 + northern of the last /mosaic/datum, -1 before
+  bool published_datum_has_origin_ = false;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;

@@ -1,0 +1,35 @@
+/**
+ * @file image_message_decoder.h
+ * @brief sensor_msgs images (raw or compressed) to OpenCV matrices, with the encoding they carry, and to the 8-bit
+ * colour (BGR) or grey images that the mosaic is made of.
+ */
+#pragma once
+
+#include <string>
+
+#include <opencv2/core.hpp>
+#include <sensor_msgs/CompressedImage.h>
+
+namespace exocet_mosaic {
+
+/// An image decoded from a message, with its sensor_msgs encoding ("bgr8", "mono8", "bayer_rggb8", ...).
+struct DecodedImage {
+  cv::Mat image;
+  std::string encoding;
+};
+
+/**
+ * Decodes a CompressedImage (JPEG or PNG). The format field starts with the original encoding ("bgr8; jpeg
+ * compressed bgr8"); a Bayer image compressed losslessly decodes to one channel and keeps its Bayer encoding.
+ * @return an empty string, or what is wrong with the message (the image is then empty).
+ */
+std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded);
+
+/**
+ * An 8-bit image for display and mosaics: CV_8UC3 BGR for colour and Bayer encodings, CV_8UC1 for mono8 and mono16
+ * (16-bit scaled by its brightest power of two, so a 12-bit camera is not rendered black).
+ * @throws std::invalid_argument naming the unsupported encoding or the mismatch between encoding and pixel type.
+ */
+cv::Mat toDisplayImage(const cv::Mat& image, const std::string& encoding);
+
+}  // namespace exocet_mosaic
