@@ -88,7 +88,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   // Wall-clock timers: /diagnostics and the paths go on when a replay pauses or its clock jumps back.
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
   diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.update(); });
+      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
   path_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0 / config_.path_rate_hz),
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();

@@ -68,7 +68,7 @@ RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   // Wall-clock timer: /diagnostics goes on when a replay pauses or its clock jumps back.
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
   diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.update(); });
+      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
   ROS_INFO("registration: method %s, model %s, listening to %s (%s), publishing %s",
            reg::toString(config_.registration.method).c_str(), reg::toString(config_.registration.model).c_str(),
            config_.image_topic.c_str(), config_.transport.c_str(), config_.motion_topic.c_str());

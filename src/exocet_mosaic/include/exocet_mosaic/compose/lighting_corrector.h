@@ -1,0 +1,93 @@
+/**
+ * @file lighting_corrector.h
+ * @brief Lighting correction: the lamp cone and the lens vignetting are fixed in IMAGE coordinates while the seabed
+ * moves under the camera, so the average of many images is the illumination field (times the seabed's mean
+ * reflectance). The field is estimated from the images themselves (running average of a downsampled image per
+ * channel, strongly low-passed, robust to dark frames) and divided out (gain = target level / field, clamped).
+ * No ROS in it.
+ */
+#pragma once
+
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace exocet_mosaic {
+namespace compose {
+
+/// Parameters of the lighting correction. validate() lists the allowed ranges.
+struct LightingConfig {
+  bool enabled = true;     ///< correct the images before composing them
+  int warmup_frames = 25;  ///< images averaged before the field is used, [1, 100000]
+  /// Sigma of the Gaussian low-pass of the field, as a fraction of the image's larger side, [0, 1]: smooths out the
+  /// seabed texture that the average has not yet cancelled (the lamp cone is much smoother).
+  double blur_fraction = 0.06;
+  int working_width_px = 64;  ///< width of the downsampled field, [8, 1024]
+  /// Time constant of the running average after the warm-up (images), [1, 10000000]: lets the field follow slow
+  /// changes (altitude changes the cone's footprint) while averaging the texture out.
+  int memory_frames = 500;
+  double max_gain = 4.0;  ///< gains are clamped to [1 / max_gain, max_gain], [1, 100]
+  /// Grey level the field is brought to, [0, 255]; 0: the field's own peak per channel (the image as lit at the
+  /// cone's centre, colour balance of the lamp kept).
+  double target_level = 0.0;
+  /// An image darker on average than this fraction of the field's mean (lamps off, turbidity, the camera in the
+  /// water column) does not update the field, [0, 1].
+  double min_relative_brightness = 0.3;
+  /// The composer feeds every n-th image to the field estimate, [1, 1000]: images 1/25 s apart are near duplicates,
+  /// and the downsampling is the composer's main cost per image that is not composed.
+  int sample_interval_frames = 5;
+
+  /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
+  std::string validate() const;
+};
+
+/// Estimates the illumination field from the images and divides it out.
+class LightingCorrector {
+ public:
+  /// Throws std::invalid_argument with config.validate()'s text.
+  explicit LightingCorrector(const LightingConfig& config = LightingConfig());
+
+  /// Changes the parameters; the field is kept unless the working width changed.
+  void setConfig(const LightingConfig& config);
+  const LightingConfig& config() const { return config_; }
+
+  /**
+   * @brief Adds an image (CV_8UC1 or CV_8UC3) to the field estimate. Images of another size or channel count than
+   * the field's restart the estimate. @return true if the image was used (not too dark).
+   */
+  bool observe(const cv::Mat& image);
+
+  /// True once warmup_frames images were observed.
+  bool ready() const;
+  int framesUsed() const { return frames_used_; }
+  int framesRejected() const { return frames_rejected_; }
+
+  /**
+   * @brief The image divided by the field (times the target level), gains clamped; the input itself (not a copy)
+   * when the field is not ready or the image does not match it. Same type as the input.
+   */
+  cv::Mat correct(const cv::Mat& image) const;
+
+  /// The low-passed field at the working resolution, CV_32FC(channels), grey levels; empty if nothing observed.
+  cv::Mat field() const;
+  /// The field resampled to the image size (CV_32FC(channels)); empty if nothing observed.
+  cv::Mat fieldAt(const cv::Size& image_size) const;
+
+  void reset();
+
+ private:
+  cv::Mat gainMap() const;  // full-size CV_32FC(n) gains, cached per field version
+
+  LightingConfig config_;
+  cv::Mat mean_;  // running mean at the working resolution, CV_32FC(n)
+  cv::Size image_size_;
+  int channels_ = 0;
+  int frames_used_ = 0;
+  int frames_rejected_ = 0;
+  long version_ = 0;
+  mutable long gain_version_ = -1;
+  mutable cv::Mat gain_;
+};
+
+}  // namespace compose
+}  // namespace exocet_mosaic

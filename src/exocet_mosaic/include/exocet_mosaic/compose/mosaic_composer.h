@@ -1,0 +1,130 @@
+/**
+ * @file mosaic_composer.h
+ * @brief Live mosaic composition (2D3 report, sections 2-4): each incoming image is composed into the open mosaic at
+ * its place, every N images (or at an extent / memory limit, or a navigation jump) the mosaic is closed and handed
+ * out geo-referenced. No ROS in it.
+ *
+ * Placement: LOCAL precision from the registration chain, GLOBAL position from the fused navigation. Within a mosaic,
+ * C_i (frame i px -> first frame px) is the product of the registration homographies; the local ground frame is
+ * L_i = P_first o C_i (P_first: ground projection of the first image's fused pose). The canvas is north-up in that
+ * local frame. At close, a 2-D similarity (or translation) S: local -> UTM is fitted by weighted, Huber-robust least
+ * squares between L_i(image centre) and the fused ground points P_i(image centre) of every image of the mosaic (the
+ * centre rather than the nadir: it is inside the image however the camera is tilted, and the pose's attitude is
+ * accounted for). S's translation goes into the tile's origin; its rotation/scale are applied (one resampling) only
+ * when they move the tile's corners by more than resample_threshold_px.
+ *
+ * Consecutive mosaics share one image. The next mosaic's fit follows where the closed one put that image's corners
+ * within tile_continuity_sigma_m, so that independent navigation noise does not misalign neighbouring tiles, while
+ * the navigation still holds the chain of tiles globally (its anchor_sigma_m accounts for the closed tile's
+ * uncertainty that the tie carries over). After a navigation jump or a flush the next mosaic starts untied.
+ */
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "exocet_mosaic/compose/composer_config.h"
+#include "exocet_mosaic/compose/ground_projection.h"
+
+namespace exocet_mosaic {
+namespace compose {
+
+/// One image handed to the composer.
+struct ComposerFrame {
+  int index = -1;      ///< frame number (for the tile's metadata)
+  double stamp_s = 0;  ///< acquisition time (s)
+  cv::Mat image;       ///< CV_8UC3 BGR or CV_8UC1, undistorted
+  /// Registration: previous frame's px -> this frame's px; empty = failed / none.
+  std::optional<cv::Matx33d> current_from_previous_px;
+  std::optional<CameraGroundPose> pose;  ///< fused pose at this image; empty = not available
+};
+
+/// A closed, geo-referenced mosaic.
+struct ClosedMosaic {
+  cv::Mat image;  ///< CV_8UC3 (or CV_8UC1 if the inputs were grey), north-up: x east, y south
+  cv::Mat mask;   ///< CV_8UC1, 255 where data
+  double origin_easting_m = 0, origin_northing_m = 0;  ///< UTM of the top-left corner of the top-left pixel
+  double gsd_m = 0;                                    ///< pixel size (m)
+  int first_frame = -1, last_frame = -1, frames_added = 0, frames_composed = 0;
+  double start_time_s = 0, end_time_s = 0;
+  double mean_camera_height_m = 0;  ///< over the images with a pose
+  std::string close_reason;         ///< "frames" | "extent" | "memory" | "navigation_jump" | "flush"
+  std::vector<std::array<Eigen::Vector2d, 4>> footprints_en_m;    ///< corners of each composed image, UTM
+  Eigen::Vector2d anchor_correction_m = Eigen::Vector2d::Zero();  ///< shift the fused positions applied (at the tile
+                                                                  ///< centre) to the chain placement
+  double anchor_sigma_m = 0;  ///< 1-sigma (per axis) of the tile's global position after that fit
+  bool resampled = false;     ///< the fit's rotation/scale were applied by resampling
+  std::string blend;          ///< blending actually used
+};
+
+/// Counters and state of the composer, for diagnostics.
+struct ComposerStats {
+  std::int64_t frames_added = 0;             ///< images given to add()
+  std::int64_t frames_composed = 0;          ///< composed into a canvas (key frames and last images)
+  std::int64_t frames_skipped_no_pose = 0;   ///< no mosaic open and no pose to start one
+  std::int64_t frames_skipped_no_chain = 0;  ///< neither registration to the previous image nor a pose
+  std::int64_t registration_fallbacks = 0;   ///< chain bridged with the pose
+  std::int64_t navigation_jumps = 0;
+  int mosaics_closed = 0;
+  std::size_t open_memory_bytes = 0;  ///< canvas + kept key frames of the open mosaic
+  double open_extent_m = 0;           ///< larger of the open mosaic's east / north extents
+  int open_frames = 0;                ///< images added to the open mosaic
+  bool lighting_ready = false;
+  std::string last_problem;  ///< last skipped image or jump, in words
+};
+
+/**
+ * @brief Composes images into mosaics and closes them into geo-referenced tiles. Not thread-safe: call from one
+ * thread (or guard).
+ */
+class MosaicComposer {
+ public:
+  /// Throws std::invalid_argument with config.validate()'s text.
+  explicit MosaicComposer(const ComposerConfig& config);
+  ~MosaicComposer();
+  MosaicComposer(const MosaicComposer&) = delete;
+  MosaicComposer& operator=(const MosaicComposer&) = delete;
+
+  /**
+   * @brief Adds an image; returns the mosaic it closed, if any (the image then also starts the next mosaic, so that
+   * consecutive tiles overlap by at least one image; after a navigation jump the image starts the next mosaic only).
+   */
+  std::optional<ClosedMosaic> add(const ComposerFrame& frame);
+
+  /// Closes the open mosaic (shutdown, end of a line); nullopt if none is open.
+  std::optional<ClosedMosaic> flush(const std::string& reason = "flush");
+
+  /// The open mosaic, downscaled so that its larger side is at most max_side_px, BGR; empty when nothing is open.
+  cv::Mat preview(int max_side_px) const;
+
+  ComposerStats stats() const;
+
+  /**
+   * @brief Live reconfigure: frames_per_mosaic, limits, blending, key frames and lighting take effect at once, the
+   * geometric fields (gsd_m, anchor, block size...) from the next mosaic. Throws std::invalid_argument.
+   */
+  void setConfig(const ComposerConfig& config);
+  const ComposerConfig& config() const { return config_; }
+
+  /// The lighting corrector (its field, for diagnostics and tests).
+  const LightingCorrector& lighting() const;
+
+ private:
+  void startMosaic(const ComposerFrame& frame, bool continued);  // continued: tied to the mosaic just closed
+  std::optional<ClosedMosaic> closeMosaic(const std::string& reason);
+
+  struct Impl;
+  ComposerConfig config_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace compose
+}  // namespace exocet_mosaic

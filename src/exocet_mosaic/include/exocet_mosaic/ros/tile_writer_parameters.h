@@ -1,0 +1,57 @@
+/**
+ * @file tile_writer_parameters.h
+ * @brief Parameters of tile_writer_node (read from its private namespace, each validated with its allowed range).
+ * config/tiles/README.md lists them.
+ */
+#pragma once
+
+#include <string>
+
+#include <ros/node_handle.h>
+
+#include "exocet_mosaic/compose/composer_config.h"
+#include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+
+namespace exocet_mosaic {
+
+struct TileWriterNodeConfig {
+  compose::ComposerConfig composer;
+  tiles::TileWriterConfig files;  ///< output_dir is required
+
+  // Inputs.
+  std::string image_topic = "/camera/image_raw";
+  std::string transport = "auto";  ///< raw | compressed | auto (the first that delivers)
+  std::string camera_info_topic;   ///< default: next to image_topic
+  std::string motion_topic = "/mosaic/motion";
+  std::string odometry_topic = "/mosaic/odometry";
+  std::string camera_height_topic = "/mosaic/camera_height";
+  std::string datum_topic = "/mosaic/datum";
+  int utm_zone = 0;  ///< 0: from datum_topic; otherwise this zone (1..60)
+  bool northern_hemisphere = true;
+  bool undistort = true;  ///< undistort the colour images as the registration did (when it says it did)
+
+  // Outputs.
+  std::string tile_topic = "/mosaic/tile";
+  std::string preview_topic = "/mosaic/preview";
+  std::string footprints_topic = "/mosaic/tile_footprints";
+  std::string frame_id = "utm";  ///< frame of the footprints and tiles
+  std::string map_frame = "map";  ///< markers are drawn in this frame when map_origin is known (rviz: single precision)
+  double preview_period_s = 1.0;
+  int preview_max_side_px = 800;
+  std::string dive_name;
+  std::string udp_host;  ///< empty: no UDP notification
+  int udp_port = 0;
+
+  // Synchronisation and life cycle.
+  double sync_timeout_s = 10.0;  // the chain may lag behind the images by seconds on a replay
+  int max_pending_frames = 300;
+  double clock_jump_s = 1.0;    ///< an image older than the newest by this much restarts the mosaic (bag loop)
+  double exit_when_idle_s = 0;  ///< > 0: flush and shut down after this many wall seconds without input (replays)
+  int max_failed_tiles_kept = 2;  ///< closed mosaics kept in memory for a retry after a write failure
+  double retry_period_s = 10.0;
+};
+
+/// @throws std::invalid_argument naming the parameter, its value and its allowed range.
+TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh);
+
+}  // namespace exocet_mosaic

@@ -1,0 +1,135 @@
+/**
+ * @file tile_writer_ros.h
+ * @brief The tile writer's ROS bridge: camera images, their registration (/mosaic/motion), the fused pose
+ * (/mosaic/odometry) and camera height (/mosaic/camera_height) in; geo-referenced GeoTIFF tiles on disk, one
+ * exocet_msgs/Tile per tile, a preview of the open mosaic, tile footprints for rviz, an optional UDP datagram per
+ * tile, and /diagnostics out. The composition and the files are the core libraries' (compose::MosaicComposer,
+ * tiles::GeoTiffTileWriter); this class converts, synchronises and reports.
+ *
+ * Tiles are written by a worker thread so that a slow disk does not hold the images back; a failed write (full or
+ * unwritable disk) is reported and retried, the node keeps composing; at shutdown the open mosaic is flushed.
+ */
+#pragma once
+
+#include <array>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
+#include <exocet_msgs/GeoDatum.h>
+#include <exocet_msgs/ImageMotion.h>
+#include <image_transport/image_transport.h>
+#include <nav_msgs/Odometry.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Range.h>
+#include <std_srvs/Trigger.h>
+
+#include "exocet_mosaic/TileWriterConfig.h"
+#include "exocet_mosaic/compose/mosaic_composer.h"
+#include "exocet_mosaic/registration/image_undistorter.h"
+#include "exocet_mosaic/ros/frame_assembler.h"
+#include "exocet_mosaic/ros/tile_writer_parameters.h"
+#include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_notifier.h"
+
+namespace exocet_mosaic {
+
+class TileWriterRos {
+ public:
+  /// @throws std::invalid_argument on a bad parameter (the message names it and its allowed range).
+  TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh);
+  /// Flushes the open mosaic and waits until every closed one is written.
+  ~TileWriterRos();
+
+ private:
+  struct PendingTile {
+    compose::ClosedMosaic mosaic;
+    int attempts = 0;
+  };
+
+  void onImage(const sensor_msgs::ImageConstPtr& msg);
+  void onCompressed(const sensor_msgs::CompressedImageConstPtr& msg);
+  void onMotion(const exocet_msgs::ImageMotionConstPtr& msg);
+  void onOdometry(const nav_msgs::OdometryConstPtr& msg);
+  void onCameraHeight(const sensor_msgs::RangeConstPtr& msg);
+  void onDatum(const exocet_msgs::GeoDatumConstPtr& msg);
+  void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg);
+  void onReconfigure(exocet_mosaic::TileWriterConfig& config, uint32_t level);
+  bool onFlush(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+  bool acceptTransport(const std::string& transport);
+  void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode);
+  void checkClock(std::int64_t stamp_ns);
+
+  void processReady(std::vector<AssembledFrame> frames);
+  void compose(const AssembledFrame& frame);
+  void enqueue(compose::ClosedMosaic mosaic);
+  void flushAll(const std::string& reason);
+  void writerLoop();
+  void publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic);
+  void publishFootprints();
+  void publishPreview();
+  void onTimer();
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void reject(const std::string& why);
+
+  ros::NodeHandle nh_, private_nh_;
+  TileWriterNodeConfig config_;
+  image_transport::ImageTransport image_transport_;
+  image_transport::Subscriber raw_sub_;
+  image_transport::Publisher preview_pub_;
+  ros::Subscriber compressed_sub_, motion_sub_, odometry_sub_, height_sub_, datum_sub_, camera_info_sub_;
+  ros::Publisher tile_pub_, footprints_pub_;
+  ros::ServiceServer flush_srv_;
+  ros::SteadyTimer timer_, diagnostics_timer_;
+  diagnostic_updater::Updater updater_;
+  std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::TileWriterConfig>> reconfigure_server_;
+  boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
+
+  // Composition (callback thread; the mutex guards it against dynamic_reconfigure's thread and the destructor).
+  std::mutex compose_mutex_;
+  compose::MosaicComposer composer_;
+  FrameAssembler assembler_;
+  std::string active_transport_;
+  std::optional<std::int64_t> newest_stamp_ns_;
+  std::optional<std::int64_t> last_composed_stamp_ns_;
+  int next_frame_index_ = 0;
+  std::vector<double> tile_fused_sigmas_m_;  ///< fused 1-sigma of the open mosaic's images (m)
+  sensor_msgs::CameraInfoConstPtr camera_info_;
+  registration::ImageUndistorter undistorter_;
+  std::optional<int> utm_zone_;
+  bool northern_ = true;
+  std::optional<Eigen::Vector2d> map_origin_en_m_;
+  ros::WallTime last_input_wall_;
+  bool received_input_ = false;
+  bool shutting_down_ = false;
+
+  // Writing (worker thread).
+  std::mutex write_mutex_;
+  std::condition_variable write_cv_;
+  std::deque<PendingTile> write_queue_;
+  std::deque<PendingTile> failed_tiles_;
+  bool stop_writer_ = false;
+  bool writing_ = false;  ///< the worker is writing a tile (the queue may be empty meanwhile)
+  bool last_write_failed_ = false;
+  std::thread writer_thread_;
+  std::unique_ptr<tiles::GeoTiffTileWriter> writer_;
+  std::optional<tiles::TileWriterConfig> files_update_;  ///< from dynamic_reconfigure, for the next write
+  std::unique_ptr<tiles::TileNotifier> notifier_;
+  std::vector<tiles::WrittenTile> written_;  ///< for the footprints (bounded)
+  std::vector<std::array<Eigen::Vector2d, 4>> written_outlines_;
+
+  // Counters for /diagnostics.
+  std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;
+  std::int64_t tiles_written_ = 0, write_failures_ = 0, tiles_dropped_ = 0, udp_failures_ = 0;
+  std::string last_problem_, last_write_error_;
+};
+
+}  // namespace exocet_mosaic

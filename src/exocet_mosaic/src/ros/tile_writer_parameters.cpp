@@ -1,0 +1,96 @@
+#include "exocet_mosaic/ros/tile_writer_parameters.h"
+
+#include <stdexcept>
+
+#include <image_transport/camera_common.h>
+
+#include "exocet_mosaic/ros/parameter_reader.h"
+
+namespace exocet_mosaic {
+
+namespace {
+
+void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
+  p.readInt("frames_per_mosaic", &c->frames_per_mosaic, 2, 100000, "images per mosaic before it is closed");
+  p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0, "pixel size of the tiles (m), 0: native, rounded to 1-2-5");
+  p.readDouble("max_extent_m", &c->max_extent_m, 0.1, 100000.0, "east or north extent that closes a mosaic (m)");
+  p.readDouble("max_memory_mb", &c->max_memory_mb, 1.0, 1000000.0, "memory of the open mosaic that closes it (MB)");
+  p.readDouble("navigation_jump_sigma", &c->navigation_jump_sigma, 1.0, 1000.0,
+               "navigation jump, in sigmas of the chain's prediction, that closes a mosaic");
+  p.readDouble("navigation_jump_min_m", &c->navigation_jump_min_m, 0.0, 100000.0,
+               "smallest navigation jump that closes a mosaic (m)");
+  p.readString("blend", &c->blend, {"feather", "multiband", "none"}, "blending of overlapping images");
+  p.readDouble("feather_power", &c->feather_power, 0.1, 10.0, "exponent of the feathering weights");
+  p.readInt("multiband_bands", &c->multiband_bands, 1, 10, "pyramid levels of the multi-band blender");
+  p.readDouble("min_key_frame_shift_fraction", &c->min_key_frame_shift_fraction, 0.0, 1.0,
+               "footprint shift (fraction of the image) between composed images, 0: every image");
+  p.readString("anchor", &c->anchor, {"similarity", "translation"}, "fit of the chain to the fused navigation");
+  p.readDouble("tile_continuity_sigma_m", &c->tile_continuity_sigma_m, 0.0, 1000.0,
+               "how strongly a tile is tied to the previous one where they share an image (m)");
+  p.readBool("lighting/enabled", &c->lighting.enabled, "correct the lamp cone and vignetting estimated from the images");
+  p.readInt("lighting/warmup_frames", &c->lighting.warmup_frames, 1, 100000, "images averaged before correcting");
+  p.readInt("lighting/memory_frames", &c->lighting.memory_frames, 1, 10000000,
+            "time constant of the lighting field's running average (images)");
+  p.readDouble("lighting/max_gain", &c->lighting.max_gain, 1.0, 100.0, "largest correction gain");
+  const std::string error = c->validate();
+  if (!error.empty()) throw std::invalid_argument("tile writer parameters: " + error);
+}
+
+void readFiles(const ParameterReader& p, tiles::TileWriterConfig* c) {
+  p.readOptionalString("output_dir", &c->output_dir, "folder of the GeoTIFF tiles (must exist)");
+  if (c->output_dir.empty())
+    throw std::invalid_argument("parameter ~output_dir is required: the folder where the tiles are written");
+  p.readOptionalString("prefix", &c->prefix, "file name prefix of the tiles");
+  p.readString("compression", &c->compression, {"DEFLATE", "LZW", "JPEG", "NONE"}, "GeoTIFF compression");
+  p.readInt("block_size_px", &c->block_size_px, 16, 4096, "GeoTIFF internal tile side (multiple of 16)");
+  p.readBool("write_world_file", &c->write_world_file, "write a .tfw world file beside each GeoTIFF");
+  p.readBool("write_cog", &c->write_cog, "also write a Cloud Optimized GeoTIFF copy");
+  p.readBool("write_kmz", &c->write_kmz, "also write a KMZ for Google Earth");
+  p.readInt("kmz_max_side_px", &c->kmz_max_side_px, 256, 32768, "largest side of the KMZ raster");
+  const std::string error = c->validate();
+  if (!error.empty()) throw std::invalid_argument("tile writer parameters: " + error);
+}
+
+}  // namespace
+
+TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh) {
+  TileWriterNodeConfig c;
+  const ParameterReader p(private_nh);
+  readComposer(p, &c.composer);
+  readFiles(p, &c.files);
+  p.readTopic("image_topic", &c.image_topic);
+  p.readString("transport", &c.transport, {"auto", "raw", "compressed"},
+               "image topic: raw (image_transport), compressed (<image_topic>/compressed) or auto");
+  c.camera_info_topic = image_transport::getCameraInfoTopic(c.image_topic);
+  p.readTopic("camera_info_topic", &c.camera_info_topic);
+  p.readTopic("motion_topic", &c.motion_topic);
+  p.readTopic("odometry_topic", &c.odometry_topic);
+  p.readTopic("camera_height_topic", &c.camera_height_topic);
+  p.readTopic("datum_topic", &c.datum_topic);
+  p.readInt("utm_zone", &c.utm_zone, 0, 60, "UTM zone of the tiles, 0: from the datum topic");
+  p.readBool("northern_hemisphere", &c.northern_hemisphere, "hemisphere of ~utm_zone");
+  p.readBool("undistort", &c.undistort, "undistort the images as the registration did");
+  p.readTopic("tile_topic", &c.tile_topic);
+  p.readTopic("preview_topic", &c.preview_topic);
+  p.readTopic("footprints_topic", &c.footprints_topic);
+  p.readOptionalString("frame_id", &c.frame_id, "UTM frame of the tiles");
+  p.readOptionalString("map_frame", &c.map_frame, "frame of the rviz markers (map origin from the datum)");
+  p.readDouble("preview_period_s", &c.preview_period_s, 0.0, 3600.0, "period of the preview image, 0: none");
+  p.readInt("preview_max_side_px", &c.preview_max_side_px, 64, 8192, "largest side of the preview image");
+  p.readOptionalString("dive_name", &c.dive_name, "dive name written into the tiles' metadata");
+  p.readOptionalString("udp_host", &c.udp_host, "host of the GIS to notify by UDP, empty: none");
+  p.readInt("udp_port", &c.udp_port, 0, 65535, "UDP port of the GIS notification");
+  if (!c.udp_host.empty() && c.udp_port == 0)
+    throw std::invalid_argument("parameter ~udp_port must be in [1, 65535] when ~udp_host is set");
+  p.readPositiveDouble("sync_timeout_s", &c.sync_timeout_s, 600.0,
+                       "wall seconds an image waits for its motion, pose and height");
+  p.readInt("max_pending_frames", &c.max_pending_frames, 1, 100000, "images waiting for their motion and pose");
+  p.readPositiveDouble("clock_jump_s", &c.clock_jump_s, 1e6, "backward stamp jump that restarts the mosaic (s)");
+  p.readDouble("exit_when_idle_s", &c.exit_when_idle_s, 0.0, 1e6,
+               "flush and shut down after this many wall seconds without input, 0: never");
+  p.readInt("max_failed_tiles_kept", &c.max_failed_tiles_kept, 0, 100, "closed mosaics kept for a write retry");
+  p.readPositiveDouble("retry_period_s", &c.retry_period_s, 3600.0, "period of write retries (s)");
+  return c;
+}
+
+}  // namespace exocet_mosaic

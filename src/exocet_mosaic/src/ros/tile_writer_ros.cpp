@@ -1,0 +1,702 @@
+#include "exocet_mosaic/ros/tile_writer_ros.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#include <Eigen/Eigenvalues>
+#include <cv_bridge/cv_bridge.h>
+#include <exocet_msgs/Tile.h>
+#include <opencv2/imgproc.hpp>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "exocet_mosaic/ros/image_message_decoder.h"
+
+namespace exocet_mosaic {
+
+using diagnostic_msgs::DiagnosticStatus;
+
+namespace {
+
+constexpr std::size_t kMaxFootprints = 2000;  // tiles drawn in rviz (bounded memory on a dive of any length)
+
+bool finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
+
+cv::Matx33d matrixFrom(const boost::array<double, 9>& values) {
+  cv::Matx33d m;
+  for (int i = 0; i < 9; ++i) m.val[i] = values[i];
+  return m;
+}
+
+}  // namespace
+
+TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
+    : nh_(nh),
+      private_nh_(private_nh),
+      config_(readTileWriterNodeConfig(private_nh)),
+      image_transport_(nh),
+      composer_(config_.composer),
+      assembler_(config_.sync_timeout_s, static_cast<std::size_t>(config_.max_pending_frames)) {
+  // A missing folder is made; one that cannot be made is reported and every tile is kept for a retry meanwhile.
+  std::error_code mkdir_error;
+  std::filesystem::create_directories(config_.files.output_dir, mkdir_error);
+  if (mkdir_error) {
+    last_write_error_ = "cannot create the output folder " + config_.files.output_dir + ": " + mkdir_error.message();
+    ROS_ERROR("tile writer: %s", last_write_error_.c_str());
+  }
+  writer_ = std::make_unique<tiles::GeoTiffTileWriter>(config_.files);
+  const int stale = writer_->removeStaleTemporaries();
+  if (stale > 0) ROS_WARN("tile writer: removed %d partial file(s) left by an interrupted run", stale);
+  if (!config_.udp_host.empty()) notifier_ = std::make_unique<tiles::TileNotifier>(config_.udp_host, config_.udp_port);
+  if (config_.utm_zone > 0) {
+    utm_zone_ = config_.utm_zone;
+    northern_ = config_.northern_hemisphere;
+  }
+
+  tile_pub_ = nh_.advertise<exocet_msgs::Tile>(config_.tile_topic, 50, true);
+  footprints_pub_ = nh_.advertise<visualization_msgs::MarkerArray>(config_.footprints_topic, 1, true);
+  preview_pub_ = image_transport_.advertise(config_.preview_topic, 1);
+
+  if (config_.transport != "compressed")
+    raw_sub_ = image_transport_.subscribe(config_.image_topic, 200, &TileWriterRos::onImage, this,
+                                          image_transport::TransportHints("raw"));
+  if (config_.transport != "raw")
+    compressed_sub_ = nh_.subscribe(config_.image_topic + "/compressed", 200, &TileWriterRos::onCompressed, this);
+  motion_sub_ = nh_.subscribe(config_.motion_topic, 500, &TileWriterRos::onMotion, this);
+  odometry_sub_ = nh_.subscribe(config_.odometry_topic, 500, &TileWriterRos::onOdometry, this);
+  height_sub_ = nh_.subscribe(config_.camera_height_topic, 500, &TileWriterRos::onCameraHeight, this);
+  datum_sub_ = nh_.subscribe(config_.datum_topic, 1, &TileWriterRos::onDatum, this);
+  camera_info_sub_ = nh_.subscribe(config_.camera_info_topic, 5, &TileWriterRos::onCameraInfo, this);
+
+  // The operator's knobs: start from the parameters read above, then follow dynamic_reconfigure.
+  reconfigure_server_ =
+      std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::TileWriterConfig>>(reconfigure_mutex_, private_nh_);
+  exocet_mosaic::TileWriterConfig start;
+  start.frames_per_mosaic = config_.composer.frames_per_mosaic;
+  start.blend = config_.composer.blend;
+  start.feather_power = config_.composer.feather_power;
+  start.min_key_frame_shift_fraction = config_.composer.min_key_frame_shift_fraction;
+  start.max_extent_m = config_.composer.max_extent_m;
+  start.max_memory_mb = config_.composer.max_memory_mb;
+  start.navigation_jump_sigma = config_.composer.navigation_jump_sigma;
+  start.navigation_jump_min_m = config_.composer.navigation_jump_min_m;
+  start.lighting_enabled = config_.composer.lighting.enabled;
+  start.write_cog = config_.files.write_cog;
+  start.write_kmz = config_.files.write_kmz;
+  reconfigure_server_->updateConfig(start);
+  reconfigure_server_->setCallback(
+      [this](exocet_mosaic::TileWriterConfig& c, uint32_t level) { onReconfigure(c, level); });
+
+  writer_thread_ = std::thread([this]() { writerLoop(); });
+  flush_srv_ = private_nh_.advertiseService("flush", &TileWriterRos::onFlush, this);
+
+  updater_.setHardwareID("tile writer " + config_.files.output_dir);
+  updater_.add("tiles", this, &TileWriterRos::diagnose);
+  const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
+  diagnostics_timer_ =
+      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  timer_ = nh_.createSteadyTimer(ros::WallDuration(0.1), [this](const ros::SteadyTimerEvent&) { onTimer(); });
+  last_input_wall_ = ros::WallTime::now();
+  ROS_INFO("tile writer: %s -> %s/%s_NNNN.tif, %d images per mosaic, %s blending", config_.image_topic.c_str(),
+           config_.files.output_dir.c_str(), config_.files.prefix.c_str(), config_.composer.frames_per_mosaic,
+           config_.composer.blend.c_str());
+}
+
+TileWriterRos::~TileWriterRos() {
+  timer_.stop();
+  flushAll("flush");
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    stop_writer_ = true;
+  }
+  write_cv_.notify_all();
+  if (writer_thread_.joinable()) writer_thread_.join();
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Inputs.
+
+bool TileWriterRos::acceptTransport(const std::string& transport) {
+  if (active_transport_.empty()) {
+    active_transport_ = transport;
+    if (transport == "raw")
+      compressed_sub_.shutdown();
+    else
+      raw_sub_.shutdown();
+  }
+  return active_transport_ == transport;
+}
+
+void TileWriterRos::reject(const std::string& why) {
+  ++rejected_;
+  last_problem_ = why;
+  ROS_ERROR_THROTTLE(5.0, "tile writer: %s", why.c_str());
+}
+
+void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
+  if (!acceptTransport("raw")) return;
+  acceptImage(msg->header, [msg]() {
+    const cv_bridge::CvImageConstPtr shared = cv_bridge::toCvShare(msg);  // throws on a bad message
+    return toDisplayImage(shared->image, msg->encoding);
+  });
+}
+
+void TileWriterRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg) {
+  if (!acceptTransport("compressed")) return;
+  acceptImage(msg->header, [msg]() {
+    DecodedImage decoded;
+    const std::string error = decodeCompressedImage(*msg, &decoded);
+    if (!error.empty()) throw std::invalid_argument(error);
+    return toDisplayImage(decoded.image, decoded.encoding);
+  });
+}
+
+void TileWriterRos::checkClock(std::int64_t stamp_ns) {
+  if (newest_stamp_ns_ && stamp_ns < *newest_stamp_ns_ - static_cast<std::int64_t>(config_.clock_jump_s * 1e9)) {
+    ++clock_jumps_;
+    last_problem_ = "the clock jumped back (a bag played again?): the open mosaic is closed, a new one starts";
+    ROS_WARN_THROTTLE(5.0, "tile writer: %s", last_problem_.c_str());
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    if (auto closed = composer_.flush("clock_jump")) enqueue(std::move(*closed));
+    assembler_.reset();
+    last_composed_stamp_ns_.reset();
+    newest_stamp_ns_.reset();
+  }
+  if (!newest_stamp_ns_ || stamp_ns > *newest_stamp_ns_) newest_stamp_ns_ = stamp_ns;
+}
+
+void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode) {
+  ++images_;
+  last_input_wall_ = ros::WallTime::now();
+  received_input_ = true;
+  if (header.stamp.isZero()) {
+    reject("image with a zero stamp: it cannot be matched to its pose");
+    return;
+  }
+  const std::int64_t stamp_ns = static_cast<std::int64_t>(header.stamp.toNSec());
+  checkClock(stamp_ns);
+  std::vector<AssembledFrame> ready;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    if (!assembler_.addImage(stamp_ns, std::move(decode), last_input_wall_.toSec())) return;
+    ready = assembler_.popReady(last_input_wall_.toSec());
+  }
+  processReady(std::move(ready));
+}
+
+void TileWriterRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
+  last_input_wall_ = ros::WallTime::now();
+  MotionPart motion;
+  motion.previous_stamp_ns = static_cast<std::int64_t>(msg->previous_stamp.toNSec());
+  motion.failed = msg->failed;
+  motion.current_from_previous_px = matrixFrom(msg->matrix);
+  motion.camera_matrix = matrixFrom(msg->camera_matrix);
+  motion.has_camera_matrix = motion.camera_matrix(0, 0) > 0.0 && motion.camera_matrix(1, 1) > 0.0;
+  motion.undistorted = msg->undistorted;
+  if (!motion.failed && !cv::checkRange(motion.current_from_previous_px)) {
+    reject("image motion with non-finite matrix: treated as a failed registration");
+    motion.failed = true;
+  }
+  std::vector<AssembledFrame> ready;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    assembler_.addMotion(static_cast<std::int64_t>(msg->header.stamp.toNSec()), motion, last_input_wall_.toSec());
+    ready = assembler_.popReady(last_input_wall_.toSec());
+  }
+  processReady(std::move(ready));
+}
+
+void TileWriterRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
+  last_input_wall_ = ros::WallTime::now();
+  PosePart pose;
+  pose.camera_en_m = Eigen::Vector2d(msg->pose.pose.position.x, msg->pose.pose.position.y);
+  const auto& c = msg->pose.covariance;
+  pose.position_cov_m2 << c[0], c[1], c[6], c[7];
+  const auto& q = msg->pose.pose.orientation;
+  pose.world_from_camera = Eigen::Quaterniond(q.w, q.x, q.y, q.z);
+  const double norm = pose.world_from_camera.norm();
+  if (!finite(pose.camera_en_m) || !finite(pose.position_cov_m2) || !(std::abs(norm - 1.0) < 1e-3)) {
+    reject("fused odometry with a non-finite position or covariance, or an orientation that is not a unit "
+           "quaternion: ignored");
+    return;
+  }
+  pose.world_from_camera.normalize();
+  std::vector<AssembledFrame> ready;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    assembler_.addPose(static_cast<std::int64_t>(msg->header.stamp.toNSec()), pose, last_input_wall_.toSec());
+    ready = assembler_.popReady(last_input_wall_.toSec());
+  }
+  processReady(std::move(ready));
+}
+
+void TileWriterRos::onCameraHeight(const sensor_msgs::RangeConstPtr& msg) {
+  last_input_wall_ = ros::WallTime::now();
+  if (!(std::isfinite(msg->range) && msg->range > 0.0f)) {
+    reject("camera height " + std::to_string(msg->range) + " m is not a positive number: ignored");
+    return;
+  }
+  std::vector<AssembledFrame> ready;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    assembler_.addHeight(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->range, last_input_wall_.toSec());
+    ready = assembler_.popReady(last_input_wall_.toSec());
+  }
+  processReady(std::move(ready));
+}
+
+void TileWriterRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
+  if (msg->utm_zone < 0 || msg->utm_zone > 60) {
+    reject("datum with UTM zone " + std::to_string(msg->utm_zone) + " (allowed 0..60): ignored");
+    return;
+  }
+  std::lock_guard<std::mutex> lock(write_mutex_);  // the writer thread reads the zone and the origin
+  if (msg->origin_easting_m != 0.0 || msg->origin_northing_m != 0.0)
+    map_origin_en_m_ = Eigen::Vector2d(msg->origin_easting_m, msg->origin_northing_m);
+  if (config_.utm_zone > 0) return;  // the parameter wins
+  if (utm_zone_ && (*utm_zone_ != msg->utm_zone || northern_ != msg->northern_hemisphere))
+    ROS_WARN("tile writer: the datum changes to zone %d%s; tiles from now on use it", msg->utm_zone,
+             msg->northern_hemisphere ? "N" : "S");
+  utm_zone_ = msg->utm_zone;
+  northern_ = msg->northern_hemisphere;
+}
+
+void TileWriterRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) { camera_info_ = msg; }
+
+void TileWriterRos::onReconfigure(exocet_mosaic::TileWriterConfig& c, uint32_t) {
+  compose::ComposerConfig next = composer_.config();
+  next.frames_per_mosaic = c.frames_per_mosaic;
+  next.blend = c.blend;
+  next.feather_power = c.feather_power;
+  next.min_key_frame_shift_fraction = c.min_key_frame_shift_fraction;
+  next.max_extent_m = c.max_extent_m;
+  next.max_memory_mb = c.max_memory_mb;
+  next.navigation_jump_sigma = c.navigation_jump_sigma;
+  next.navigation_jump_min_m = c.navigation_jump_min_m;
+  next.lighting.enabled = c.lighting_enabled;
+  const std::string error = next.validate();
+  if (!error.empty()) {
+    ROS_ERROR("tile writer: reconfiguration refused: %s", error.c_str());
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    composer_.setConfig(next);
+  }
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    // Applied by the worker before its next write: it may be writing with the current writer now.
+    tiles::TileWriterConfig files = files_update_ ? *files_update_ : writer_->config();
+    files.write_cog = c.write_cog;
+    files.write_kmz = c.write_kmz;
+    files_update_ = files;
+  }
+  ROS_INFO("tile writer: reconfigured: %d images per mosaic, %s blending, key frames every %.2f image, lighting %s",
+           next.frames_per_mosaic, next.blend.c_str(), next.min_key_frame_shift_fraction,
+           next.lighting.enabled ? "on" : "off");
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Composition.
+
+void TileWriterRos::processReady(std::vector<AssembledFrame> frames) {
+  for (const AssembledFrame& frame : frames) compose(frame);
+}
+
+void TileWriterRos::compose(const AssembledFrame& frame) {
+  compose::ComposerFrame input;
+  input.index = next_frame_index_++;
+  input.stamp_s = static_cast<double>(frame.stamp_ns) * 1e-9;
+  try {
+    input.image = frame.decode_image();
+  } catch (const std::exception& e) {
+    reject(std::string("image cannot be used: ") + e.what());
+    return;
+  }
+  if (input.image.empty()) {
+    reject("empty image");
+    return;
+  }
+  // The colour image must be undistorted as the registration undistorted its grey one.
+  if (frame.motion && frame.motion->undistorted && config_.undistort && camera_info_) {
+    const sensor_msgs::CameraInfo& info = *camera_info_;
+    const cv::Size size(static_cast<int>(info.width), static_cast<int>(info.height));
+    std::array<double, 9> k{};
+    std::array<double, 5> d{};
+    std::copy(info.K.begin(), info.K.end(), k.begin());
+    for (size_t i = 0; i < std::min<size_t>(5, info.D.size()); ++i) d[i] = info.D[i];
+    try {
+      if (!undistorter_.sameCalibration(size, k, d)) undistorter_ = registration::ImageUndistorter(size, k, d);
+      if (undistorter_.active()) input.image = undistorter_.apply(input.image);
+    } catch (const std::invalid_argument& e) {
+      reject(std::string("cannot undistort the image like the registration did: ") + e.what());
+    }
+  }
+  // The chain holds only between consecutive composed images.
+  if (frame.motion && !frame.motion->failed && last_composed_stamp_ns_ &&
+      frame.motion->previous_stamp_ns == *last_composed_stamp_ns_)
+    input.current_from_previous_px = frame.motion->current_from_previous_px;
+  if (frame.pose && frame.camera_height_m) {
+    cv::Matx33d k = cv::Matx33d::eye();
+    bool have_k = false;
+    if (frame.motion && frame.motion->has_camera_matrix) {
+      k = frame.motion->camera_matrix;
+      have_k = true;
+    } else if (camera_info_ && camera_info_->K[0] > 0.0) {
+      k = matrixFrom(camera_info_->K);
+      have_k = true;
+    }
+    if (have_k) {
+      compose::CameraGroundPose pose;
+      pose.camera_en_m = frame.pose->camera_en_m;
+      pose.position_cov_m2 = frame.pose->position_cov_m2;
+      pose.world_from_camera = frame.pose->world_from_camera;
+      pose.camera_height_m = *frame.camera_height_m;
+      pose.camera_matrix = k;
+      input.pose = pose;
+    } else {
+      last_problem_ = "no camera matrix (image motion or camera_info): images cannot be placed";
+      ROS_WARN_THROTTLE(10.0, "tile writer: %s", last_problem_.c_str());
+    }
+  }
+  std::optional<compose::ClosedMosaic> closed;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    try {
+      closed = composer_.add(input);
+    } catch (const std::exception& e) {
+      reject(std::string("image not composed: ") + e.what());
+      return;
+    }
+  }
+  ++frames_composed_calls_;
+  last_composed_stamp_ns_ = frame.stamp_ns;
+  if (closed) {
+    // The fit averages the navigation over the tile's images as if their errors were independent; the filter's
+    // errors are correlated over many images, so the tile's position is no better than the fused 1-sigma.
+    if (!tile_fused_sigmas_m_.empty()) {
+      std::nth_element(tile_fused_sigmas_m_.begin(), tile_fused_sigmas_m_.begin() + tile_fused_sigmas_m_.size() / 2,
+                       tile_fused_sigmas_m_.end());
+      closed->anchor_sigma_m =
+          std::max(closed->anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
+    }
+    tile_fused_sigmas_m_.clear();
+    enqueue(std::move(*closed));
+  }
+  if (input.pose) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(input.pose->position_cov_m2);
+    tile_fused_sigmas_m_.push_back(std::sqrt(std::max(0.0, eigen.eigenvalues().maxCoeff())));
+  }
+}
+
+void TileWriterRos::flushAll(const std::string& reason) {
+  std::vector<AssembledFrame> rest;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    rest = assembler_.popAll();
+  }
+  processReady(std::move(rest));
+  std::lock_guard<std::mutex> lock(compose_mutex_);
+  if (auto closed = composer_.flush(reason)) {
+    if (!tile_fused_sigmas_m_.empty()) {
+      std::sort(tile_fused_sigmas_m_.begin(), tile_fused_sigmas_m_.end());
+      closed->anchor_sigma_m = std::max(closed->anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
+    }
+    tile_fused_sigmas_m_.clear();
+    enqueue(std::move(*closed));
+  }
+}
+
+bool TileWriterRos::onFlush(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+  // The operator closes the open mosaic now (end of a line, before a transit); waits until it is on disk.
+  std::int64_t written_before = 0;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    written_before = tiles_written_ + write_failures_;
+  }
+  flushAll("operator");
+  std::unique_lock<std::mutex> lock(write_mutex_);
+  write_cv_.wait_for(lock, std::chrono::seconds(60), [this]() { return write_queue_.empty() && !writing_; });
+  const std::int64_t done = tiles_written_ + write_failures_ - written_before;
+  response.success = write_queue_.empty() && !writing_ && last_write_failed_ == false;
+  response.message = done == 0 ? "no open mosaic" : response.success ? "tile written" : "write failed: " + last_write_error_;
+  return true;
+}
+
+void TileWriterRos::onTimer() {
+  std::vector<AssembledFrame> ready;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    ready = assembler_.popReady(ros::WallTime::now().toSec());
+  }
+  processReady(std::move(ready));
+  static ros::WallTime last_preview;
+  if (config_.preview_period_s > 0.0 && (ros::WallTime::now() - last_preview).toSec() >= config_.preview_period_s) {
+    last_preview = ros::WallTime::now();
+    publishPreview();
+  }
+  if (config_.exit_when_idle_s > 0.0 && received_input_ && !shutting_down_ &&
+      (ros::WallTime::now() - last_input_wall_).toSec() > config_.exit_when_idle_s) {
+    shutting_down_ = true;
+    ROS_INFO("tile writer: no input for %.1f s: flushing the open mosaic and shutting down", config_.exit_when_idle_s);
+    flushAll("flush");
+    {
+      std::unique_lock<std::mutex> lock(write_mutex_);
+      write_cv_.wait(lock, [this]() { return write_queue_.empty() && !writing_; });
+    }
+    ros::shutdown();
+  }
+}
+
+void TileWriterRos::publishPreview() {
+  if (preview_pub_.getNumSubscribers() == 0) return;
+  cv::Mat preview;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    preview = composer_.preview(config_.preview_max_side_px);
+  }
+  if (preview.empty()) return;
+  std_msgs::Header header;
+  header.stamp = ros::Time::now();
+  header.frame_id = config_.frame_id;
+  preview_pub_.publish(cv_bridge::CvImage(header, preview.channels() == 1 ? "mono8" : "bgr8", preview).toImageMsg());
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Writing (worker thread).
+
+void TileWriterRos::enqueue(compose::ClosedMosaic mosaic) {
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    write_queue_.push_back(PendingTile{std::move(mosaic), 0});
+  }
+  write_cv_.notify_all();
+}
+
+void TileWriterRos::writerLoop() {
+  std::unique_lock<std::mutex> lock(write_mutex_);
+  ros::WallTime last_retry = ros::WallTime::now();
+  while (true) {
+    write_cv_.wait_for(lock, std::chrono::milliseconds(500), [this]() { return stop_writer_ || !write_queue_.empty(); });
+    const bool retry_due =
+        !failed_tiles_.empty() && (ros::WallTime::now() - last_retry).toSec() >= config_.retry_period_s;
+    if (write_queue_.empty() && !retry_due) {
+      if (stop_writer_) break;
+      continue;
+    }
+    PendingTile pending;
+    if (!write_queue_.empty()) {
+      pending = std::move(write_queue_.front());
+      write_queue_.pop_front();
+    } else {
+      pending = std::move(failed_tiles_.front());
+      failed_tiles_.pop_front();
+      last_retry = ros::WallTime::now();
+    }
+    if (!utm_zone_) {
+      // No zone yet (no datum): keep the mosaic until one arrives.
+      last_write_error_ = "no UTM zone known (no /mosaic/datum and ~utm_zone is 0): tile kept in memory";
+      failed_tiles_.push_back(std::move(pending));
+      while (static_cast<int>(failed_tiles_.size()) > std::max(1, config_.max_failed_tiles_kept)) {
+        failed_tiles_.pop_front();
+        ++tiles_dropped_;
+      }
+      continue;
+    }
+    tiles::TileRaster raster;
+    raster.image = pending.mosaic.image;
+    raster.mask = pending.mosaic.mask;
+    raster.origin_easting_m = pending.mosaic.origin_easting_m;
+    raster.origin_northing_m = pending.mosaic.origin_northing_m;
+    raster.gsd_m = pending.mosaic.gsd_m;
+    raster.utm_zone = *utm_zone_;
+    raster.northern_hemisphere = northern_;
+    tiles::TileMetadata metadata;
+    metadata.dive_name = config_.dive_name;
+    metadata.first_frame = pending.mosaic.first_frame;
+    metadata.last_frame = pending.mosaic.last_frame;
+    metadata.start_time_s = pending.mosaic.start_time_s;
+    metadata.end_time_s = pending.mosaic.end_time_s;
+    metadata.mean_altitude_m = pending.mosaic.mean_camera_height_m;
+    metadata.close_reason = pending.mosaic.close_reason;
+    metadata.extra["frames_composed"] = std::to_string(pending.mosaic.frames_composed);
+    metadata.extra["position_sigma_m"] = std::to_string(pending.mosaic.anchor_sigma_m);
+    metadata.extra["blend"] = pending.mosaic.blend;
+    if (files_update_) {
+      writer_ = std::make_unique<tiles::GeoTiffTileWriter>(*files_update_);
+      files_update_.reset();
+    }
+    tiles::GeoTiffTileWriter* writer = writer_.get();
+    writing_ = true;
+    lock.unlock();  // the write takes time: let the composition enqueue meanwhile
+    const tiles::WrittenTile tile = writer->write(raster, metadata);
+    lock.lock();
+    writing_ = false;
+    last_write_failed_ = !tile.ok;
+    if (!tile.ok) {
+      ++write_failures_;
+      last_write_error_ = tile.error;
+      ROS_ERROR_THROTTLE(5.0, "tile writer: tile not written (kept in memory for a retry): %s", tile.error.c_str());
+      ++pending.attempts;
+      failed_tiles_.push_back(std::move(pending));
+      while (static_cast<int>(failed_tiles_.size()) > config_.max_failed_tiles_kept) {
+        ++tiles_dropped_;
+        ROS_ERROR("tile writer: more than %d tiles failed to write: the oldest is dropped",
+                  config_.max_failed_tiles_kept);
+        failed_tiles_.pop_front();
+      }
+      write_cv_.notify_all();
+      continue;
+    }
+    ++tiles_written_;
+    ROS_INFO("tile writer: %s (%dx%d px, %.3f m/px, EPSG %d, frames %d-%d, %s) in %.0f ms",
+             tile.geotiff_path.c_str(), tile.width_px, tile.height_px, tile.gsd_m, tile.epsg,
+             pending.mosaic.first_frame, pending.mosaic.last_frame, pending.mosaic.close_reason.c_str(),
+             tile.write_ms);
+    publishTile(tile, pending.mosaic);
+    write_cv_.notify_all();
+  }
+}
+
+void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic) {
+  exocet_msgs::Tile msg;
+  msg.header.stamp.fromSec(std::max(0.0, mosaic.end_time_s));
+  msg.header.frame_id = config_.frame_id;
+  msg.index = tile.index;
+  msg.geotiff_path = tile.geotiff_path;
+  msg.world_file_path = tile.world_file_path;
+  msg.cog_path = tile.cog_path;
+  msg.kmz_path = tile.kmz_path;
+  msg.epsg = tile.epsg;
+  msg.utm_zone = utm_zone_.value_or(0);
+  msg.northern_hemisphere = northern_;
+  msg.min_easting_m = tile.min_easting_m;
+  msg.min_northing_m = tile.min_northing_m;
+  msg.max_easting_m = tile.max_easting_m;
+  msg.max_northing_m = tile.max_northing_m;
+  msg.west_deg = tile.west_deg;
+  msg.south_deg = tile.south_deg;
+  msg.east_deg = tile.east_deg;
+  msg.north_deg = tile.north_deg;
+  msg.gsd_m = tile.gsd_m;
+  msg.width_px = tile.width_px;
+  msg.height_px = tile.height_px;
+  msg.first_frame = mosaic.first_frame;
+  msg.last_frame = mosaic.last_frame;
+  msg.start_time.fromSec(std::max(0.0, mosaic.start_time_s));
+  msg.end_time.fromSec(std::max(0.0, mosaic.end_time_s));
+  msg.frames_composed = mosaic.frames_composed;
+  msg.mean_altitude_m = mosaic.mean_camera_height_m;
+  msg.position_sigma_m = mosaic.anchor_sigma_m;
+  msg.close_reason = mosaic.close_reason;
+  msg.write_ms = tile.write_ms;
+  tile_pub_.publish(msg);
+  if (notifier_) {
+    std::string error;
+    if (!notifier_->send(tile, &error)) {
+      ++udp_failures_;
+      ROS_WARN_THROTTLE(10.0, "tile writer: UDP notification to %s not sent: %s", notifier_->destination().c_str(),
+                        error.c_str());
+    }
+  }
+  written_.push_back(tile);
+  written_outlines_.push_back({Eigen::Vector2d(tile.min_easting_m, tile.min_northing_m),
+                               Eigen::Vector2d(tile.max_easting_m, tile.min_northing_m),
+                               Eigen::Vector2d(tile.max_easting_m, tile.max_northing_m),
+                               Eigen::Vector2d(tile.min_easting_m, tile.max_northing_m)});
+  if (written_.size() > kMaxFootprints) {
+    written_.erase(written_.begin());
+    written_outlines_.erase(written_outlines_.begin());
+  }
+  publishFootprints();
+}
+
+void TileWriterRos::publishFootprints() {
+  // rviz draws in single precision: UTM coordinates go relative to the map origin when the fusion gave one.
+  const bool in_map = map_origin_en_m_.has_value();
+  const Eigen::Vector2d origin = in_map ? *map_origin_en_m_ : Eigen::Vector2d::Zero();
+  visualization_msgs::MarkerArray array;
+  for (std::size_t i = 0; i < written_outlines_.size(); ++i) {
+    visualization_msgs::Marker m;
+    m.header.stamp = ros::Time::now();
+    m.header.frame_id = in_map ? config_.map_frame : config_.frame_id;
+    m.ns = "tiles";
+    m.id = written_[i].index;
+    m.type = visualization_msgs::Marker::LINE_STRIP;
+    m.action = visualization_msgs::Marker::ADD;
+    m.pose.orientation.w = 1.0;
+    m.scale.x = 0.05;
+    m.color.r = 1.0f;
+    m.color.g = 0.6f;
+    m.color.b = 0.1f;
+    m.color.a = 1.0f;
+    for (int k = 0; k <= 4; ++k) {
+      geometry_msgs::Point p;
+      p.x = written_outlines_[i][k % 4].x() - origin.x();
+      p.y = written_outlines_[i][k % 4].y() - origin.y();
+      m.points.push_back(p);
+    }
+    array.markers.push_back(m);
+  }
+  footprints_pub_.publish(array);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Health.
+
+void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  compose::ComposerStats stats;
+  std::size_t pending = 0;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    stats = composer_.stats();
+    pending = assembler_.pendingImages();
+  }
+  std::size_t queued = 0, failed = 0;
+  std::int64_t written = 0, write_failures = 0, dropped = 0;
+  std::string write_error;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    queued = write_queue_.size();
+    failed = failed_tiles_.size();
+    written = tiles_written_;
+    write_failures = write_failures_;
+    dropped = tiles_dropped_;
+    write_error = last_write_error_;
+  }
+  if (dropped > 0)
+    status.summary(DiagnosticStatus::ERROR, "tiles lost: the output folder kept failing (" + write_error + ")");
+  else if (failed > 0)
+    status.summary(DiagnosticStatus::ERROR, "tiles waiting for a retry: " + write_error);
+  else if (!utm_zone_)
+    status.summary(DiagnosticStatus::WARN, "no UTM zone yet (/mosaic/datum or ~utm_zone)");
+  else if (images_ > 0 && stats.frames_composed == 0)
+    status.summary(DiagnosticStatus::WARN, "images arrive but none is composed: " + stats.last_problem);
+  else
+    status.summary(DiagnosticStatus::OK, "composing");
+  status.add("images received", images_);
+  status.add("images rejected", rejected_);
+  status.add("frames composed", stats.frames_composed);
+  status.add("frames skipped (no pose)", stats.frames_skipped_no_pose);
+  status.add("frames skipped (no chain, no pose)", stats.frames_skipped_no_chain);
+  status.add("registration gaps bridged by the navigation", stats.registration_fallbacks);
+  status.add("navigation jumps", stats.navigation_jumps);
+  status.add("frames waiting for motion/pose", pending);
+  status.add("frames released incomplete (timeout)", assembler_.timedOut());
+  status.add("clock jumps", clock_jumps_);
+  status.add("open mosaic images", stats.open_frames);
+  status.add("open mosaic extent (m)", stats.open_extent_m);
+  status.add("open mosaic memory (MB)", static_cast<double>(stats.open_memory_bytes) / 1e6);
+  status.add("lighting field ready", stats.lighting_ready);
+  status.add("tiles written", written);
+  status.add("tiles queued", queued);
+  status.add("tiles waiting for a retry", failed);
+  status.add("write failures", write_failures);
+  status.add("tiles lost", dropped);
+  status.add("UDP failures", udp_failures_);
+  status.add("last problem", last_problem_.empty() ? stats.last_problem : last_problem_);
+  status.add("last write error", write_error);
+}
+
+}  // namespace exocet_mosaic

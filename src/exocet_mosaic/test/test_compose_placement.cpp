@@ -1,0 +1,135 @@
+// Placement of the composed mosaics against a rendered truth: exact chain and poses, noisy fused positions, and the
+// alignment of consecutive tiles.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+#include "compose_fixtures.h"
+
+namespace ec = exocet_mosaic::compose;
+using compose_test::FrameFactory;
+using compose_test::TruthOrtho;
+
+namespace {
+
+ec::ComposerConfig baseConfig() {
+  ec::ComposerConfig c;
+  c.lighting.enabled = false;  // the rendered frames are evenly lit
+  return c;
+}
+
+// The flight: about 6 m east with a slow turn; the truth covers it with margin.
+FrameFactory makeFactory(const TruthOrtho& truth, double noise_m) {
+  FrameFactory f;
+  f.truth = &truth;
+  f.position_noise_m = noise_m;
+  f.flight.turn_rad_per_frame = 0.002;
+  return f;
+}
+
+const TruthOrtho& truth() {
+  static const TruthOrtho t = TruthOrtho::make(11.0, 7.0, 0.005, 500000.0 - 2.0, 4800000.0 + 3.0);
+  return t;
+}
+
+}  // namespace
+
+TEST(ComposePlacement, ExactPosesExactChainMatchTheTruth) {
+  FrameFactory factory = makeFactory(truth(), 0.0);
+  ec::ComposerConfig config = baseConfig();
+  config.frames_per_mosaic = 1000;
+  ec::MosaicComposer composer(config);
+  for (int i = 0; i < 120; ++i) ASSERT_FALSE(composer.add(factory.frame(i)));
+  const auto tile = composer.flush();
+  ASSERT_TRUE(tile);
+  EXPECT_EQ(tile->close_reason, "flush");
+  EXPECT_DOUBLE_EQ(tile->gsd_m, 0.005);  // 2.2 m / 400 px rounded down
+  EXPECT_EQ(tile->frames_added, 120);
+  EXPECT_GT(tile->frames_composed, 5);
+  EXPECT_LT(tile->frames_composed, 60);  // key frames only
+  EXPECT_FALSE(tile->resampled);
+  EXPECT_LT(tile->anchor_correction_m.norm(), 1e-6);
+  // Origin on the truth's terms: compare the mosaic with the truth resampled on the mosaic's grid.
+  const cv::Mat expected =
+      truth().onGrid(tile->origin_easting_m, tile->origin_northing_m, tile->gsd_m, tile->image.size());
+  cv::Mat inner;
+  cv::erode(tile->mask, inner, cv::Mat(), cv::Point(-1, -1), 3);
+  const double mae = compose_test::meanAbsError(tile->image, expected, inner);
+  const cv::Rect r = compose_test::innerRect(inner, 1.5);
+  ASSERT_GT(r.width, 100);
+  const cv::Point2d shift = compose_test::phaseShift(expected(r), tile->image(r));
+  std::printf("exact: %dx%d px, mean abs error %.2f grey, offset (%.3f, %.3f) px over %dx%d\n", tile->image.cols,
+              tile->image.rows, mae, shift.x, shift.y, r.width, r.height);
+  EXPECT_LT(mae, 4.0);
+  EXPECT_LT(std::hypot(shift.x, shift.y), 0.2);
+  // Footprints reported in UTM agree with the truth.
+  EXPECT_LT(compose_test::placementError(*tile, factory.flight).norm(), 1e-6);
+}
+
+TEST(ComposePlacement, NoisyPositionsAverageOutAndSigmaIsConsistent) {
+  // Small images for speed; the navigation noise is independent per image here (a worst case for the fit's
+  // assumptions would be correlated noise).
+  FrameFactory factory = makeFactory(truth(), 0.1);
+  factory.flight.image_size = cv::Size(160, 120);
+  factory.flight.k = cv::Matx33d(200, 0, 79.5, 0, 200, 59.5, 0, 0, 1);
+  ec::ComposerConfig config = baseConfig();
+  config.frames_per_mosaic = 50;
+  // Independent tiles: each tile's fit against its own navigation (the continuity tie, tested below, makes tiles
+  // follow each other and their reported sigma conservative).
+  config.tile_continuity_sigma_m = 1000.0;
+  ec::MosaicComposer composer(config);
+  std::vector<ec::ClosedMosaic> tiles;
+  for (int i = 0; i < 300; ++i)
+    if (auto t = composer.add(factory.frame(i))) tiles.push_back(*t);
+  ASSERT_GE(tiles.size(), 5u);
+  double sum_e2 = 0, sum_s2 = 0, max_e = 0;
+  for (const auto& t : tiles) {
+    EXPECT_EQ(t.close_reason, "frames");
+    const Eigen::Vector2d e = compose_test::placementError(t, factory.flight);
+    std::printf("tile %d-%d: error (%.4f, %.4f) m, anchor_sigma %.4f m, correction (%.3f, %.3f) m%s\n", t.first_frame,
+                t.last_frame, e.x(), e.y(), t.anchor_sigma_m, t.anchor_correction_m.x(), t.anchor_correction_m.y(),
+                t.resampled ? ", resampled" : "");
+    sum_e2 += e.squaredNorm() / 2.0;  // per axis
+    sum_s2 += t.anchor_sigma_m * t.anchor_sigma_m;
+    max_e = std::max(max_e, e.norm());
+  }
+  const double rms_e = std::sqrt(sum_e2 / tiles.size()), rms_s = std::sqrt(sum_s2 / tiles.size());
+  std::printf("per-axis placement error RMS %.4f m, anchor_sigma RMS %.4f m (navigation sigma 0.1 m)\n", rms_e, rms_s);
+  EXPECT_LT(max_e, 0.04);  // << 0.1 m: averaged over the tile's images
+  EXPECT_LT(rms_e, 2.0 * rms_s);
+  EXPECT_GT(rms_e, 0.5 * rms_s);
+}
+
+TEST(ComposePlacement, ConsecutiveTilesOverlapAndAlign) {
+  FrameFactory factory = makeFactory(truth(), 0.1);
+  ec::ComposerConfig config = baseConfig();
+  config.frames_per_mosaic = 60;
+  ec::MosaicComposer composer(config);
+  std::vector<ec::ClosedMosaic> tiles;
+  for (int i = 0; i < 190; ++i)
+    if (auto t = composer.add(factory.frame(i))) tiles.push_back(*t);
+  ASSERT_GE(tiles.size(), 3u);
+  for (std::size_t k = 1; k < tiles.size(); ++k) {
+    const auto& a = tiles[k - 1];
+    const auto& b = tiles[k];
+    EXPECT_EQ(b.first_frame, a.last_frame);  // one shared image
+    ASSERT_DOUBLE_EQ(a.gsd_m, b.gsd_m);
+    const double g = a.gsd_m;
+    // b on a's grid: a's pixel (c, r) = b's pixel (c - dx, r - dy).
+    const double dx = (b.origin_easting_m - a.origin_easting_m) / g;
+    const double dy = (a.origin_northing_m - b.origin_northing_m) / g;
+    const cv::Matx23d m(1, 0, -dx, 0, 1, -dy);
+    cv::Mat b_on_a, b_mask_on_a;
+    cv::warpAffine(b.image, b_on_a, m, a.image.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP);
+    cv::warpAffine(b.mask, b_mask_on_a, m, a.image.size(), cv::INTER_NEAREST | cv::WARP_INVERSE_MAP);
+    cv::Mat both;
+    cv::bitwise_and(a.mask, b_mask_on_a, both);
+    cv::erode(both, both, cv::Mat(), cv::Point(-1, -1), 3);
+    const cv::Rect r = compose_test::innerRect(both, 1.3);
+    ASSERT_GT(r.width, 60) << "overlap of tiles " << k - 1 << " and " << k;
+    const cv::Point2d shift = compose_test::phaseShift(a.image(r), b_on_a(r));
+    std::printf("tiles %zu/%zu: overlap window %dx%d px, misalignment (%.3f, %.3f) px\n", k - 1, k, r.width, r.height,
+                shift.x, shift.y);
+    EXPECT_LT(std::hypot(shift.x, shift.y), 1.0);
+  }
+}
