@@ -4,7 +4,7 @@
 #
 # Environment (all optional):
 #   EXOCET_DEMO_BAG         bag to replay (default bags/sample_lawnmower.bag)
-#   EXOCET_DEMO_RATE        replay speed, times real time (default 5)
+#   EXOCET_DEMO_RATE        replay speed, times real time (default 3)
 #   EXOCET_DEMO_OUT         output folder (default out/demo; emptied first)
 #   EXOCET_DEVEL            catkin devel space to use (default devel, as made by `make build`)
 #   EXOCET_DEMO_MASTER_URI  join this ROS master (e.g. one your rviz uses) instead of starting a private one
@@ -15,7 +15,7 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 bag=${EXOCET_DEMO_BAG:-bags/sample_lawnmower.bag}
-rate=${EXOCET_DEMO_RATE:-5}
+rate=${EXOCET_DEMO_RATE:-3}
 out=${EXOCET_DEMO_OUT:-$root/out/demo}
 devel=${EXOCET_DEVEL:-$root/devel}
 [[ $bag == /* ]] || bag=$root/$bag  # roslaunch runs the nodes in ROS_HOME: relative paths would not resolve
@@ -70,7 +70,9 @@ if [[ $status -ne 0 ]]; then
   exit 1
 fi
 # A required node that fails ends the launch early, and roslaunch still exits 0: say so rather than plot a part.
-if grep -E "REQUIRED process \[" "$log" | grep -qv "\[player-"; then
+# The tile writer ending cleanly is the normal end (it exits once the chain is drained).
+if grep -A1 -E "REQUIRED process \[" "$log" | grep -v -E "REQUIRED process \[tile_writer-|finished cleanly|^--" |
+  grep -q .; then
   echo "run-demo: a node failed before the end of the bag; from $log:" >&2
   grep -E "FATAL|ERROR|REQUIRED process" "$log" | head -n 20 >&2
   exit 1
@@ -79,6 +81,30 @@ fi
 echo "run-demo: plotting the trajectories"
 rosrun exocet_mosaic plot_trajectories --input "$out" --output "$out/trajectories.png" \
   --dive-name "$(basename "$bag" .bag)"
+
+echo "run-demo: tiles overview and gdalinfo summaries"
+tiles=("$out"/tiles/tile_*.tif)
+if [[ ! -e ${tiles[0]} ]]; then
+  echo "run-demo: no tile was written in $out/tiles; from $log:" >&2
+  grep -E "tile writer" "$log" | tail -n 20 >&2
+  exit 1
+fi
+rosrun exocet_mosaic tiles_overview --tiles "$out/tiles" --track "$out/fused_track.csv" \
+  --output "$out/tiles_overview.png"
+for tile in "${tiles[@]}"; do
+  [[ $tile == *.cog.tif ]] && continue
+  gdalinfo "$tile" > "${tile%.tif}.gdalinfo.txt"
+done
+{
+  for tile in "${tiles[@]}"; do
+    [[ $tile == *.cog.tif ]] && continue
+    printf '%s: %s, %s, pixel %s\n' "$(basename "$tile")" \
+      "$(grep -m1 '^Size is' "${tile%.tif}.gdalinfo.txt")" \
+      "$(grep -m1 -o 'ID\["EPSG",[0-9]*\]\]$' "${tile%.tif}.gdalinfo.txt" | tail -n1)" \
+      "$(grep -m1 '^Pixel Size' "${tile%.tif}.gdalinfo.txt" | sed 's/Pixel Size = //')"
+  done
+} > "$out/tiles_summary.txt"
+cat "$out/tiles_summary.txt"
 
 echo
 echo "run-demo: outputs in $out:"
