@@ -5,11 +5,11 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include <Eigen/Eigenvalues>
 #include <cv_bridge/cv_bridge.h>
 #include <exocet_msgs/Tile.h>
-#include <opencv2/imgproc.hpp>
 #include <visualization_msgs/MarkerArray.h>
+#include <Eigen/Eigenvalues>
+#include <opencv2/imgproc.hpp>
 
 #include "exocet_mosaic/ros/image_message_decoder.h"
 
@@ -94,8 +94,8 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   updater_.setHardwareID("tile writer " + config_.files.output_dir);
   updater_.add("tiles", this, &TileWriterRos::diagnose);
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
-  diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  diagnostics_timer_ = nh_.createSteadyTimer(ros::WallDuration(period_s),
+                                             [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
   timer_ = nh_.createSteadyTimer(ros::WallDuration(0.1), [this](const ros::SteadyTimerEvent&) { onTimer(); });
   last_input_wall_ = ros::WallTime::now();
   ROS_INFO("tile writer: %s -> %s/%s_NNNN.tif, %d images per mosaic, %s blending", config_.image_topic.c_str(),
@@ -176,11 +176,17 @@ void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv
   }
   const std::int64_t stamp_ns = static_cast<std::int64_t>(header.stamp.toNSec());
   checkClock(stamp_ns);
+  addAndProcess([&](double now_s) { return assembler_.addImage(stamp_ns, std::move(decode), now_s); });
+}
+
+void TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
+  // One part in, then every frame it completes (or that waited too long) out, in stamp order.
   std::vector<AssembledFrame> ready;
   {
     std::lock_guard<std::mutex> lock(compose_mutex_);
-    if (!assembler_.addImage(stamp_ns, std::move(decode), last_input_wall_.toSec())) return;
-    ready = assembler_.popReady(last_input_wall_.toSec());
+    const double now_s = last_input_wall_.toSec();
+    if (!add(now_s)) return;
+    ready = assembler_.popReady(now_s);
   }
   processReady(std::move(ready));
 }
@@ -198,13 +204,9 @@ void TileWriterRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
     reject("image motion with non-finite matrix: treated as a failed registration");
     motion.failed = true;
   }
-  std::vector<AssembledFrame> ready;
-  {
-    std::lock_guard<std::mutex> lock(compose_mutex_);
-    assembler_.addMotion(static_cast<std::int64_t>(msg->header.stamp.toNSec()), motion, last_input_wall_.toSec());
-    ready = assembler_.popReady(last_input_wall_.toSec());
-  }
-  processReady(std::move(ready));
+  addAndProcess([&](double now_s) {
+    return assembler_.addMotion(static_cast<std::int64_t>(msg->header.stamp.toNSec()), motion, now_s);
+  });
 }
 
 void TileWriterRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
@@ -217,18 +219,15 @@ void TileWriterRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
   pose.world_from_camera = Eigen::Quaterniond(q.w, q.x, q.y, q.z);
   const double norm = pose.world_from_camera.norm();
   if (!finite(pose.camera_en_m) || !finite(pose.position_cov_m2) || !(std::abs(norm - 1.0) < 1e-3)) {
-    reject("fused odometry with a non-finite position or covariance, or an orientation that is not a unit "
-           "quaternion: ignored");
+    reject(
+        "fused odometry with a non-finite position or covariance, or an orientation that is not a unit "
+        "quaternion: ignored");
     return;
   }
   pose.world_from_camera.normalize();
-  std::vector<AssembledFrame> ready;
-  {
-    std::lock_guard<std::mutex> lock(compose_mutex_);
-    assembler_.addPose(static_cast<std::int64_t>(msg->header.stamp.toNSec()), pose, last_input_wall_.toSec());
-    ready = assembler_.popReady(last_input_wall_.toSec());
-  }
-  processReady(std::move(ready));
+  addAndProcess([&](double now_s) {
+    return assembler_.addPose(static_cast<std::int64_t>(msg->header.stamp.toNSec()), pose, now_s);
+  });
 }
 
 void TileWriterRos::onCameraHeight(const sensor_msgs::RangeConstPtr& msg) {
@@ -237,13 +236,9 @@ void TileWriterRos::onCameraHeight(const sensor_msgs::RangeConstPtr& msg) {
     reject("camera height " + std::to_string(msg->range) + " m is not a positive number: ignored");
     return;
   }
-  std::vector<AssembledFrame> ready;
-  {
-    std::lock_guard<std::mutex> lock(compose_mutex_);
-    assembler_.addHeight(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->range, last_input_wall_.toSec());
-    ready = assembler_.popReady(last_input_wall_.toSec());
-  }
-  processReady(std::move(ready));
+  addAndProcess([&](double now_s) {
+    return assembler_.addHeight(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->range, now_s);
+  });
 }
 
 void TileWriterRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
@@ -378,8 +373,7 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
     if (!tile_fused_sigmas_m_.empty()) {
       std::nth_element(tile_fused_sigmas_m_.begin(), tile_fused_sigmas_m_.begin() + tile_fused_sigmas_m_.size() / 2,
                        tile_fused_sigmas_m_.end());
-      closed->anchor_sigma_m =
-          std::max(closed->anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
+      closed->anchor_sigma_m = std::max(closed->anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
     }
     tile_fused_sigmas_m_.clear();
     enqueue(std::move(*closed));
@@ -420,7 +414,9 @@ bool TileWriterRos::onFlush(std_srvs::Trigger::Request&, std_srvs::Trigger::Resp
   write_cv_.wait_for(lock, std::chrono::seconds(60), [this]() { return write_queue_.empty() && !writing_; });
   const std::int64_t done = tiles_written_ + write_failures_ - written_before;
   response.success = write_queue_.empty() && !writing_ && last_write_failed_ == false;
-  response.message = done == 0 ? "no open mosaic" : response.success ? "tile written" : "write failed: " + last_write_error_;
+  response.message = done == 0          ? "no open mosaic"
+                     : response.success ? "tile written"
+                                        : "write failed: " + last_write_error_;
   return true;
 }
 
@@ -478,7 +474,8 @@ void TileWriterRos::writerLoop() {
   std::unique_lock<std::mutex> lock(write_mutex_);
   ros::WallTime last_retry = ros::WallTime::now();
   while (true) {
-    write_cv_.wait_for(lock, std::chrono::milliseconds(500), [this]() { return stop_writer_ || !write_queue_.empty(); });
+    write_cv_.wait_for(lock, std::chrono::milliseconds(500),
+                       [this]() { return stop_writer_ || !write_queue_.empty(); });
     const bool retry_due =
         !failed_tiles_.empty() && (ros::WallTime::now() - last_retry).toSec() >= config_.retry_period_s;
     if (write_queue_.empty() && !retry_due) {
@@ -550,10 +547,9 @@ void TileWriterRos::writerLoop() {
       continue;
     }
     ++tiles_written_;
-    ROS_INFO("tile writer: %s (%dx%d px, %.3f m/px, EPSG %d, frames %d-%d, %s) in %.0f ms",
-             tile.geotiff_path.c_str(), tile.width_px, tile.height_px, tile.gsd_m, tile.epsg,
-             pending.mosaic.first_frame, pending.mosaic.last_frame, pending.mosaic.close_reason.c_str(),
-             tile.write_ms);
+    ROS_INFO("tile writer: %s (%dx%d px, %.3f m/px, EPSG %d, frames %d-%d, %s) in %.0f ms", tile.geotiff_path.c_str(),
+             tile.width_px, tile.height_px, tile.gsd_m, tile.epsg, pending.mosaic.first_frame,
+             pending.mosaic.last_frame, pending.mosaic.close_reason.c_str(), tile.write_ms);
     publishTile(tile, pending.mosaic);
     write_cv_.notify_all();
   }

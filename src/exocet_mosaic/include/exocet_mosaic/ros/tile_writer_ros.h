@@ -14,6 +14,7 @@
 #include <array>
 #include <condition_variable>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -67,6 +68,8 @@ class TileWriterRos {
   bool acceptTransport(const std::string& transport);
   void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode);
   void checkClock(std::int64_t stamp_ns);
+  /// Adds a part to the assembler under the lock (add returns false for a late part), then composes what is ready.
+  void addAndProcess(const std::function<bool(double now_s)>& add);
 
   void processReady(std::vector<AssembledFrame> frames);
   void compose(const AssembledFrame& frame);
