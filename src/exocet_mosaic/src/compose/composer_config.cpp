@@ -23,6 +23,8 @@ std::string ComposerConfig::validate() const {
         navigation_jump_sigma);
   check(navigation_jump_min_m >= 0.0 && navigation_jump_min_m <= 100000.0, "navigation_jump_min_m", "in [0, 100000]",
         navigation_jump_min_m);
+  check(navigation_jump_confirm_frames >= 1 && navigation_jump_confirm_frames <= 1000, "navigation_jump_confirm_frames",
+        "in [1, 1000]", navigation_jump_confirm_frames);
   if (blend != "feather" && blend != "multiband" && blend != "none")
     bad.push_back("blend must be \"feather\", \"multiband\" or \"none\", got \"" + blend + "\"");
   check(feather_power >= 0.1 && feather_power <= 10.0, "feather_power", "in [0.1, 10]", feather_power);

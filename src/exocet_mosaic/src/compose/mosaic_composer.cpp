@@ -70,6 +70,7 @@ struct OpenMosaic {
   std::vector<std::array<Eigen::Vector2d, 4>> footprints_local;
   Eigen::Vector2d extent_min = Eigen::Vector2d::Constant(1e300), extent_max = Eigen::Vector2d::Constant(-1e300);
   int first_frame = -1, last_frame = -1, frames_added = 0, frames_composed = 0;
+  int jump_streak = 0;  ///< consecutive images whose fused position departs from the chain
   double start_time_s = 0, end_time_s = 0, height_sum_m = 0;
   int height_count = 0;
   std::vector<WarpedFrame> kept;  // for multi-band blending at close
@@ -298,7 +299,16 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
     const Eigen::Matrix2d cov = p.cov_m2 + running.covAt(p.local_m);
     const double sigma = std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues()(1)));
     const double threshold = std::max(config_.navigation_jump_min_m, config_.navigation_jump_sigma * sigma);
-    if (m.running.points() > 0 && residual.norm() > threshold) {
+    const bool departs = m.running.points() > 0 && residual.norm() > threshold;
+    m.jump_streak = departs ? m.jump_streak + 1 : 0;
+    if (departs && m.jump_streak < config_.navigation_jump_confirm_frames) {
+      // One outlying fused position (a USBL outlier the filter let through) must not cut the mosaic: the image is
+      // placed by the chain and its position left out of the fit until the departure persists.
+      std::ostringstream msg;
+      msg << "frame " << frame.index << ": fused position " << residual.norm() << " m from the chain (threshold "
+          << threshold << " m), not used";
+      s.stats.last_problem = msg.str();
+    } else if (departs) {
       std::ostringstream msg;
       msg << "navigation jump at frame " << frame.index << ": " << residual.norm() << " m from the chain (threshold "
           << threshold << " m)";
@@ -308,8 +318,9 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
       s.tie.valid = false;  // the navigation moved: start afresh at the new pose
       if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame)) startMosaic(frame, false);
       return closed;
+    } else {
+      point = p;
     }
-    point = p;
   }
 
   // Into the open mosaic.

@@ -19,6 +19,8 @@ void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
                "navigation jump, in sigmas of the chain's prediction, that closes a mosaic");
   p.readDouble("navigation_jump_min_m", &c->navigation_jump_min_m, 0.0, 100000.0,
                "smallest navigation jump that closes a mosaic (m)");
+  p.readInt("navigation_jump_confirm_frames", &c->navigation_jump_confirm_frames, 1, 1000,
+            "consecutive images departing from the chain before it is a navigation jump");
   p.readString("blend", &c->blend, {"feather", "multiband", "none"}, "blending of overlapping images");
   p.readDouble("feather_power", &c->feather_power, 0.1, 10.0, "exponent of the feathering weights");
   p.readInt("multiband_bands", &c->multiband_bands, 1, 10, "pyramid levels of the multi-band blender");

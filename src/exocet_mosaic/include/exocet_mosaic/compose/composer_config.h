@@ -24,6 +24,9 @@ struct ComposerConfig {
   /// max(navigation_jump_min_m, navigation_jump_sigma * sigma of that difference). [1, 1000]
   double navigation_jump_sigma = 5.0;
   double navigation_jump_min_m = 1.0;  ///< [0, 100000]
+  /// Consecutive images that must depart before it is a jump, [1, 1000]; the departing ones before stay in the
+  /// mosaic, placed by the chain, and out of the fit (a single outlying fix does not cut the mosaic).
+  int navigation_jump_confirm_frames = 3;
   std::string blend = "feather";       ///< "feather" | "multiband" | "none"
   double feather_power = 1.0;          ///< exponent of the feather weights, [0.1, 10]
   int multiband_bands = 5;             ///< pyramid levels of the multi-band blender, [1, 10]
