@@ -303,6 +303,7 @@ class TrajectoryLoggerTest(unittest.TestCase):
             m = self.fix(arrival_s - 1.5, lat0 + 1e-5 * k, lon0 - 2e-5 * k, 0.5 + 0.1 * k)
             pubs['usbl'].publish(m)
             usbl_sent.append((m, arrival_s))
+            time.sleep(0.3)  # the fix and the next /clock travel on two connections: let the fix arrive first
 
         # Bad input: each rejected, counted and survived.
         bad_gt = self.odometry(2.5, float('nan'), n0, -62.0, (0, 0, 0))
@@ -373,6 +374,7 @@ class TrajectoryLoggerTest(unittest.TestCase):
             m = self.fix(arrival_s - 1.2, lat, lon, 2.0)
             pubs['usbl'].publish(m)
             sent.append((m, arrival_s))
+            time.sleep(0.3)  # the fix and the next /clock travel on two connections: let the fix arrive first
         self.check_usbl_rows(os.path.join(self.folder, 'usbl_fixes.csv'), sent, zone, False)
         with open(os.path.join(self.folder, 'datum.json')) as f:
             text = f.read()
