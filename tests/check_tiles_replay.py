@@ -22,9 +22,10 @@ import unittest
 
 import numpy as np
 import rospy
+import yaml
 import rostest
 from exocet_msgs.msg import GeoDatum, Tile as TileMsg
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path
 from std_srvs.srv import Trigger
 
 from exocet_mosaic.tile_analysis import Tile, find_checker_saddle, read_world_file
@@ -47,20 +48,25 @@ class TilesReplayTest(unittest.TestCase):
             c = msg.pose.covariance
             sigmas.append(math.sqrt(max(np.linalg.eigvalsh(np.array([[c[0], c[1]], [c[6], c[7]]])))))
         rospy.Subscriber('/mosaic/odometry', Odometry, on_odometry, queue_size=1000)
+        truth_paths = []
+        rospy.Subscriber('/mosaic/ground_truth_path', Path, truth_paths.append, queue_size=10)
         udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         udp.bind(('127.0.0.1', rospy.get_param('~udp_port')))
         udp.settimeout(0.05)
         datagrams = []
         time.sleep(1.0)
         topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/nav/odometry', '/nav/usbl', '/nav/imu',
-                  '/nav/altitude', '/nav/datum', '/tf_static']
+                  '/nav/altitude', '/nav/datum', '/tf_static', '/ground_truth/odometry']
         player = subprocess.Popen(['rosbag', 'play', '--clock', '-q', '-r', str(rospy.get_param('~rate')),
                                    '--queue=1000', '--wait-for-subscribers', bag, '--topics'] + topics,
                                   start_new_session=True)
         # Never leave a player behind: it would reconnect to the next test's master (same port) and replay there.
         atexit.register(lambda: player.poll() is None and os.killpg(player.pid, signal.SIGKILL))
         last_count, last_change = -1, time.time()
+        published_mid_dive = None
         while time.time() - last_change < 30.0:
+            if published_mid_dive is None and len(sigmas) > 50:  # the bag plays: its topics are advertised
+                published_mid_dive = {name for name, _ in rospy.get_published_topics()}
             try:
                 datagrams.append(json.loads(udp.recv(65536).decode('utf-8')))
             except socket.timeout:
@@ -69,6 +75,7 @@ class TilesReplayTest(unittest.TestCase):
                 last_count, last_change = len(sigmas), time.time()
             if player.poll() is not None and time.time() - last_change > 4.0:
                 break
+        self.check_rviz_view(truth, truth_paths, published_mid_dive)
         rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
         reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()
         self.assertTrue(reply.success, reply.message)
@@ -110,7 +117,7 @@ class TilesReplayTest(unittest.TestCase):
             self.assertEqual(int(tile.metadata['EXOCET_FIRST_FRAME']), msg.first_frame)
             self.assertEqual(int(tile.metadata['EXOCET_LAST_FRAME']), msg.last_frame)
             self.assertGreater(tile.mask.mean(), 0.2, 'the tile holds imagery')
-            # Native GSD: camera height ~2.5 m over a 60-degree PAL camera (~3.6 mm) rounded down to 1-2-5.
+            # Native GSD: camera height ~2.5 m over a 60-degree PAL camera (~3.6 mm) rounded down to 3.2 mm.
             self.assertTrue(0.001 <= gsd <= 0.005, gsd)
         frames = sorted((m.first_frame, m.last_frame) for m, _ in tiles)
         for (_, last), (first, _) in zip(frames, frames[1:]):
@@ -143,6 +150,33 @@ class TilesReplayTest(unittest.TestCase):
         # Global placement comes from the fused navigation: a few of its sigmas.
         self.assertLess(max(errors), max(3.0 * sigma_m, 0.05))
         shutil.rmtree(output_dir, ignore_errors=True)  # passed: the tiles (tens of MB) are not kept
+
+    def check_rviz_view(self, truth, truth_paths, published):
+        """Every display of launch/exocet.rviz has its topic published by the chain; the ground-truth path follows
+        the ground truth."""
+        here = os.path.dirname(os.path.abspath(__file__))
+        view = yaml.safe_load(open(os.path.join(here, '..', 'launch', 'exocet.rviz')))
+        self.assertIsNotNone(published, 'the chain published fused poses while the bag played')
+        wanted = []
+        for display in view['Visualization Manager']['Displays']:
+            topic = display.get('Topic') or display.get('Marker Topic') or display.get('Image Topic')
+            if not topic:
+                continue
+            if display.get('Transport Hint', 'raw') != 'raw':
+                topic += '/' + display['Transport Hint']
+            wanted.append(topic)
+        self.assertGreaterEqual(len(wanted), 8)
+        missing = [t for t in wanted if t not in published]
+        self.assertEqual(missing, [], 'rviz displays with no publisher')
+        self.assertTrue(truth_paths, 'the ground-truth path is published')
+        poses = truth_paths[-1].poses
+        self.assertGreater(len(poses), 100)
+        self.assertEqual(truth_paths[-1].header.frame_id, 'utm')
+        # The base_link track of the ground truth stays within a metre of the camera track (lever arm).
+        cams = np.array([[float(r['cam_easting_m']), float(r['cam_northing_m'])] for r in truth])
+        for pose in poses[::10]:
+            p = np.array([pose.pose.position.x, pose.pose.position.y])
+            self.assertLess(np.min(np.linalg.norm(cams - p, axis=1)), 1.0)
 
 
 if __name__ == '__main__':

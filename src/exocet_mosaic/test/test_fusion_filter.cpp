@@ -168,6 +168,33 @@ TEST(NavigationFilter, GatingRejectsAnOutlyingFixAndSaysSo) {
   EXPECT_EQ(filter.addAbsoluteFix(10.0, truth, 0.25 * Eigen::Matrix2d::Identity()).status, UpdateStatus::kApplied);
 }
 
+TEST(NavigationFilter, GatingChangedMidDiveAppliesToTheNextFix) {
+  NavigationFilter filter{FilterConfig()};
+  filter.initialize(0.0, Eigen::Vector2d(0.0, 0.0), 0.04 * Eigen::Matrix2d::Identity());
+  for (int k = 1; k <= 10; ++k) filter.addImageMotion((k - 1) * 0.2, k * 0.2, motionOf(Eigen::Vector2d(0.0, 0.0), 5e-4));
+  const Eigen::Matrix2d fix_cov = 0.25 * Eigen::Matrix2d::Identity();
+  // An offset whose Mahalanobis^2 lies between the 0.999 gate (13.8) and the 0.999999 gate (27.6).
+  const double sigma_m = std::sqrt(filter.current().P(0, 0) + 0.25);
+  const Eigen::Vector2d offset(std::sqrt(20.0) * sigma_m, 0.0);
+  const UpdateResult tight = filter.addAbsoluteFix(2.0, offset, fix_cov);
+  ASSERT_EQ(tight.status, UpdateStatus::kRejectedByGate) << tight.detail;
+  EXPECT_GT(tight.mahalanobis_sq, 13.8);
+  EXPECT_LT(tight.mahalanobis_sq, 27.6);
+  filter.setGating(0.999999, 3);
+  EXPECT_NEAR(filter.config().gateThreshold(), 27.63, 0.01);
+  EXPECT_EQ(filter.config().recovery_rejections, 3);
+  EXPECT_EQ(filter.addAbsoluteFix(2.0, offset, fix_cov).status, UpdateStatus::kApplied);
+  // A bad value is refused with its range, and the gate in force is kept.
+  try {
+    filter.setGating(1.5, 3);
+    ADD_FAILURE() << "gate_probability 1.5 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("gate_probability"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(filter.setGating(0.99, 0), std::invalid_argument);
+  EXPECT_NEAR(filter.config().gateThreshold(), 27.63, 0.01);
+}
+
 TEST(NavigationFilter, RecoversAfterALongDropoutWhenLost) {
   // During a 60 s fix dropout the image motion is biased (a drift its covariance does not admit): the filter ends
   // 6 m off while believing itself within centimetres. The first fixes are rejected; after recovery_rejections of

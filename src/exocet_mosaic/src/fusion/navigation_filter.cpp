@@ -103,6 +103,15 @@ std::string FilterConfig::validate() const {
 
 double FilterConfig::gateThreshold() const { return -2.0 * std::log1p(-gate_probability); }
 
+void NavigationFilter::setGating(double gate_probability, int recovery_rejections) {
+  FilterConfig changed = config_;
+  changed.gate_probability = gate_probability;
+  changed.recovery_rejections = recovery_rejections;
+  const std::string problems = changed.validate();
+  if (!problems.empty()) throw std::invalid_argument("gating: " + problems);
+  config_ = changed;
+}
+
 std::string toString(UpdateStatus status) {
   switch (status) {
     case UpdateStatus::kApplied: return "applied";

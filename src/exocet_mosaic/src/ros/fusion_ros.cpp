@@ -93,6 +93,13 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
   initializeFromParameters();
+  reconfigure_server_ =
+      std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>>(reconfigure_mutex_, private_nh_);
+  exocet_mosaic::FusionConfig start;
+  start.gate_probability = filter_.config().gate_probability;
+  start.recovery_rejections = filter_.config().recovery_rejections;
+  reconfigure_server_->updateConfig(start);
+  reconfigure_server_->setCallback([this](exocet_mosaic::FusionConfig& c, uint32_t level) { onReconfigure(c, level); });
   ROS_INFO("fusion: motion %s, dead reckoning %s, fixes %s, attitude %s, altitude %s; odometry on %s",
            config_.motion_topic.c_str(),
            (config_.odometry_topic.empty() ? config_.nav_fix_topic : config_.odometry_topic).c_str(),
@@ -788,6 +795,23 @@ void FusionRos::writeTracks() {
   }
 }
 
+void FusionRos::onReconfigure(exocet_mosaic::FusionConfig& c, uint32_t) {
+  const fusion::FilterConfig& now = filter_.config();
+  if (c.gate_probability == now.gate_probability && c.recovery_rejections == now.recovery_rejections) return;
+  try {
+    filter_.setGating(c.gate_probability, c.recovery_rejections);
+  } catch (const std::invalid_argument& e) {
+    ROS_ERROR("fusion: reconfiguration refused, keeping the gate in force: %s", e.what());
+    c.gate_probability = now.gate_probability;
+    c.recovery_rejections = now.recovery_rejections;
+    return;
+  }
+  config_.filter.gate_probability = c.gate_probability;
+  config_.filter.recovery_rejections = c.recovery_rejections;
+  ROS_INFO("fusion: reconfigured: gate probability %.9g (Mahalanobis^2 <= %.1f), recovery after %d rejections",
+           c.gate_probability, filter_.config().gateThreshold(), c.recovery_rejections);
+}
+
 void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   auto total = [](const std::map<std::string, uint64_t>& m) {
     uint64_t n = 0;
@@ -797,6 +821,7 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.add("initialised", filter_.initialized());
   status.add("utm zone", grid_ ? grid_->name() + " (EPSG " + std::to_string(grid_->epsg()) + ") from " + grid_source_
                                : std::string("unknown"));
+  status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", filter_.config().gate_probability, filter_.config().gateThreshold());
   status.add("image motions", motions_);
   status.add("image motion failures", motion_failures_);
   status.add("dead reckoning messages", dead_reckonings_);

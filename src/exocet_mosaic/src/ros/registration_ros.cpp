@@ -69,6 +69,17 @@ RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
   diagnostics_timer_ =
       nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::RegistrationConfig>>(
+      reconfigure_mutex_, private_nh_);
+  exocet_mosaic::RegistrationConfig start;
+  start.method = reg::toString(config_.registration.method);
+  start.model = reg::toString(config_.registration.model);
+  start.klt_max_features = config_.registration.klt.max_features;
+  start.klt_min_tracks = config_.registration.klt.min_tracks;
+  start.illumination_enabled = config_.registration.illumination.enabled;
+  reconfigure_server_->updateConfig(start);
+  reconfigure_server_->setCallback(
+      [this](exocet_mosaic::RegistrationConfig& c, uint32_t level) { onReconfigure(c, level); });
   ROS_INFO("registration: method %s, model %s, listening to %s (%s), publishing %s",
            reg::toString(config_.registration.method).c_str(), reg::toString(config_.registration.model).c_str(),
            config_.image_topic.c_str(), config_.transport.c_str(), config_.motion_topic.c_str());
@@ -118,6 +129,56 @@ void RegistrationRos::reject(const std::string& why) {
   ++rejected_;
   last_problem_ = why;
   ROS_ERROR_THROTTLE(5.0, "registration: skipping an image: %s", why.c_str());
+}
+
+void RegistrationRos::onReconfigure(exocet_mosaic::RegistrationConfig& c, uint32_t) {
+  reg::RegistrationConfig next = config_.registration;
+  std::string error;
+  try {
+    next.method = reg::registrationMethodFromString(c.method);
+    next.model = reg::motionModelFromString(c.model);
+    next.klt.max_features = c.klt_max_features;
+    next.klt.min_tracks = c.klt_min_tracks;
+    next.illumination.enabled = c.illumination_enabled;
+    error = next.validate();
+  } catch (const std::invalid_argument& e) {
+    error = e.what();
+  }
+  std::unique_ptr<reg::FrameRegistrar> registrar;
+  if (error.empty()) {
+    try {
+      registrar = reg::makeRegistrar(next);
+    } catch (const std::invalid_argument& e) {
+      error = e.what();
+    }
+  }
+  if (!error.empty()) {
+    ROS_ERROR("registration: reconfiguration refused, keeping the settings in force: %s", error.c_str());
+    last_problem_ = "reconfiguration refused: " + error;
+    // Show the operator what is in force.
+    c.method = reg::toString(config_.registration.method);
+    c.model = reg::toString(config_.registration.model);
+    c.klt_max_features = config_.registration.klt.max_features;
+    c.klt_min_tracks = config_.registration.klt.min_tracks;
+    c.illumination_enabled = config_.registration.illumination.enabled;
+    return;
+  }
+  if (registrar_) {  // not on the server's first call, which only echoes the start values
+    const bool changed = next.method != config_.registration.method || next.model != config_.registration.model ||
+                         next.klt.max_features != config_.registration.klt.max_features ||
+                         next.klt.min_tracks != config_.registration.klt.min_tracks ||
+                         next.illumination.enabled != config_.registration.illumination.enabled;
+    if (!changed) return;
+  }
+  config_.registration = next;
+  registrar_ = std::move(registrar);
+  have_previous_ = false;  // the new registrar starts its sequence at the next image
+  last_motion_ = reg::MotionEstimate();
+  ++reconfigurations_;
+  updater_.setHardwareID("registration " + reg::toString(next.method));
+  ROS_INFO("registration: reconfigured: method %s, model %s, KLT %d features / %d tracks, illumination %s",
+           c.method.c_str(), c.model.c_str(), c.klt_max_features, c.klt_min_tracks,
+           c.illumination_enabled ? "on" : "off");
 }
 
 void RegistrationRos::restart(const std::string& why) {
@@ -290,6 +351,7 @@ void RegistrationRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("pairs registered", pairs_);
   status.add("pairs failed", failures_);
   status.add("sequence restarts", restarts_);
+  status.add("reconfigurations", reconfigurations_);
   status.addf("recent failure fraction", "%.3f", recent);
   status.addf("recent mean inlier fraction", "%.3f", inliers);
   status.addf("mean processing ms", "%.2f", pairs_ ? processing_ms_sum_ / double(pairs_) : 0.0);

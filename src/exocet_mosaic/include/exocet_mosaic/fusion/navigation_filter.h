@@ -131,6 +131,9 @@ class NavigationFilter {
   explicit NavigationFilter(const FilterConfig& config);
 
   const FilterConfig& config() const { return config_; }
+  /// Changes the gate mid-dive (dynamic_reconfigure): it applies to the next event, and to events re-processed
+  /// after a late fix. @throws std::invalid_argument naming the value and its allowed range.
+  void setGating(double gate_probability, int recovery_rejections);
 
   /// Starts (or restarts) the filter at a camera position with its covariance (m^2), e.g. the operator's first
   /// position or the first fix. Heading, drift and pixel size start at 0 with their configured sigmas.

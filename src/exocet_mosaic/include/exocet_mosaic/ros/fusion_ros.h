@@ -14,6 +14,8 @@
 #include <string>
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
+#include <exocet_mosaic/FusionConfig.h>
 #include <exocet_msgs/GeoDatum.h>
 #include <exocet_msgs/ImageMotion.h>
 #include <exocet_msgs/SetInitialPose.h>
@@ -112,10 +114,14 @@ class FusionRos {
   void ensureMapOrigin(const Eigen::Vector2d& en_m);
   void writeTracks();
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void onReconfigure(exocet_mosaic::FusionConfig& config, uint32_t level);
 
   ros::NodeHandle nh_, private_nh_;
   FusionNodeConfig config_;
   fusion::NavigationFilter filter_;
+  // The operator's knobs (gating). Node and nodelet run the callbacks on one thread (ST node handles).
+  std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>> reconfigure_server_;
+  boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
 
   ros::Subscriber motion_sub_, odometry_sub_, nav_fix_sub_, usbl_sub_, imu_sub_, altitude_sub_, camera_info_sub_,
       datum_sub_;

@@ -12,6 +12,8 @@
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <diagnostic_updater/publisher.h>
+#include <dynamic_reconfigure/server.h>
+#include <exocet_mosaic/RegistrationConfig.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -76,11 +78,16 @@ class RegistrationRos {
   void reject(const std::string& why);
   void restart(const std::string& why);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void onReconfigure(exocet_mosaic::RegistrationConfig& config, uint32_t level);
 
   ros::NodeHandle nh_;
   ros::NodeHandle private_nh_;
   RegistrationNodeConfig config_;
   std::unique_ptr<registration::FrameRegistrar> registrar_;
+  // The operator's knobs (method, model, ...). Node and nodelet run the callbacks on one thread (ST node handles).
+  std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::RegistrationConfig>> reconfigure_server_;
+  boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
+  long reconfigurations_ = 0;
   registration::GrayConverter converter_;
 
   image_transport::ImageTransport image_transport_;
