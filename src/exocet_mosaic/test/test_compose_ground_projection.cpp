@@ -65,12 +65,18 @@ TEST(ComposeGroundProjection, NadirGeometryAndHorizon) {
 }
 
 TEST(ComposeGroundProjection, GsdRoundsDownToOneTwoFive) {
-  EXPECT_DOUBLE_EQ(ec::roundGsdDown(0.0047), 0.002);
-  EXPECT_DOUBLE_EQ(ec::roundGsdDown(0.0055), 0.005);
+  EXPECT_NEAR(ec::roundGsdDown(0.0047), 0.004, 1e-15);
+  EXPECT_NEAR(ec::roundGsdDown(0.0036), 0.0032, 1e-15);  // a PAL camera 2.5 m above the seabed
+  EXPECT_NEAR(ec::roundGsdDown(0.0055), 0.005, 1e-15);
   EXPECT_DOUBLE_EQ(ec::roundGsdDown(0.001), 0.001);
-  EXPECT_DOUBLE_EQ(ec::roundGsdDown(0.0199), 0.01);
-  EXPECT_NEAR(ec::roundGsdDown(0.25), 0.2, 1e-15);
-  EXPECT_NEAR(ec::roundGsdDown(7.0), 5.0, 1e-12);
+  EXPECT_NEAR(ec::roundGsdDown(0.0199), 0.016, 1e-15);
+  EXPECT_NEAR(ec::roundGsdDown(0.25), 0.25, 1e-15);
+  EXPECT_NEAR(ec::roundGsdDown(0.0999), 0.08, 1e-15);
+  EXPECT_NEAR(ec::roundGsdDown(7.0), 6.3, 1e-12);
+  for (double g = 1e-3; g < 10.0; g *= 1.01) {  // never up, never more than one R'10 step (< 28 %) down
+    EXPECT_LE(ec::roundGsdDown(g), g * (1 + 1e-12));
+    EXPECT_GT(ec::roundGsdDown(g), g / 1.28);
+  }
   EXPECT_EQ(ec::roundGsdDown(0.0), 0.0);
 }
 

@@ -133,3 +133,69 @@ TEST(ComposePlacement, ConsecutiveTilesOverlapAndAlign) {
     EXPECT_LT(std::hypot(shift.x, shift.y), 1.0);
   }
 }
+
+TEST(ComposePlacement, LazyImagesGiveTheSameTileAndOnlyTheDrawnOnesAreDecoded) {
+  // A compressed stream's images are decoded only for the frames the composer draws: same tile, fewer decodes.
+  FrameFactory factory = makeFactory(truth(), 0.0);
+  ec::ComposerConfig config = baseConfig();
+  config.lighting.enabled = true;  // samples one image in sample_interval_frames: those are decoded too
+  config.frames_per_mosaic = 50;
+  ec::MosaicComposer eager(config), lazy(config);
+  int loads = 0;
+  std::vector<ec::ClosedMosaic> eager_tiles, lazy_tiles;
+  for (int i = 0; i < 120; ++i) {
+    const ec::ComposerFrame frame = factory.frame(i);
+    if (auto t = eager.add(frame)) eager_tiles.push_back(*t);
+    ec::ComposerFrame deferred = frame;
+    deferred.image = cv::Mat();
+    deferred.image_size = frame.image.size();
+    deferred.image_channels = frame.image.channels();
+    deferred.load_image = [image = frame.image, &loads]() {
+      ++loads;
+      return image.clone();
+    };
+    if (auto t = lazy.add(deferred)) lazy_tiles.push_back(*t);
+  }
+  if (auto t = eager.flush()) eager_tiles.push_back(*t);
+  if (auto t = lazy.flush()) lazy_tiles.push_back(*t);
+  ASSERT_EQ(eager_tiles.size(), 3u);
+  ASSERT_EQ(lazy_tiles.size(), eager_tiles.size());
+  for (size_t k = 0; k < eager_tiles.size(); ++k) {
+    EXPECT_EQ(lazy_tiles[k].frames_composed, eager_tiles[k].frames_composed);
+    EXPECT_DOUBLE_EQ(lazy_tiles[k].origin_easting_m, eager_tiles[k].origin_easting_m);
+    ASSERT_EQ(lazy_tiles[k].image.size(), eager_tiles[k].image.size());
+    EXPECT_EQ(cv::norm(lazy_tiles[k].image, eager_tiles[k].image, cv::NORM_INF), 0.0);
+  }
+  int composed = 0;
+  for (const auto& t : eager_tiles) composed += t.frames_composed;
+  std::printf("lazy images: %d decodes for 120 frames, %d drawn\n", loads, composed);
+  EXPECT_LT(loads, 120 / 2);
+  EXPECT_LE(loads, composed + 120 / config.lighting.sample_interval_frames + 1);
+}
+
+TEST(ComposePlacement, AnImageThatCannotBeLoadedIsSkippedAndSaid) {
+  FrameFactory factory = makeFactory(truth(), 0.0);
+  ec::ComposerConfig config = baseConfig();
+  config.min_key_frame_shift_fraction = 0.0;  // every image is drawn, so every loader is called
+  ec::MosaicComposer composer(config);
+  for (int i = 0; i < 30; ++i) {
+    ec::ComposerFrame frame = factory.frame(i);
+    const cv::Mat image = frame.image;
+    frame.image = cv::Mat();
+    frame.image_size = image.size();
+    frame.image_channels = image.channels();
+    if (i == 10) {
+      frame.load_image = []() -> cv::Mat { throw std::invalid_argument("corrupt JPEG"); };
+    } else if (i == 20) {
+      frame.load_image = [image]() { return image(cv::Rect(0, 0, 100, 100)).clone(); };  // not the announced size
+    } else {
+      frame.load_image = [image]() { return image; };
+    }
+    composer.add(frame);
+    if (i == 10) EXPECT_NE(composer.stats().last_problem.find("corrupt JPEG"), std::string::npos);
+    if (i == 20) EXPECT_NE(composer.stats().last_problem.find("announced"), std::string::npos);
+  }
+  const auto tile = composer.flush();
+  ASSERT_TRUE(tile);
+  EXPECT_EQ(tile->frames_composed, 28);
+}

@@ -78,9 +78,14 @@ double nativeGsd(const CameraGroundPose& pose) {
 
 double roundGsdDown(double gsd_m) {
   if (!(gsd_m > 0) || !std::isfinite(gsd_m)) return 0.0;
+  // ISO 3 preferred numbers (R'10): steps of about 25 %, so the tile keeps at least 80 % of the camera's resolution
+  // (1-2-5 could drop 60 % of it, and cost the composer up to 6 times the pixels).
+  static constexpr double kSeries[] = {1.0, 1.25, 1.6, 2.0, 2.5, 3.2, 4.0, 5.0, 6.3, 8.0};
   const double decade = std::pow(10.0, std::floor(std::log10(gsd_m) + 1e-12));
   const double mantissa = gsd_m / decade;  // in [1, 10)
-  const double step = mantissa >= 5.0 - 1e-9 ? 5.0 : (mantissa >= 2.0 - 1e-9 ? 2.0 : 1.0);
+  double step = 1.0;
+  for (double v : kSeries)
+    if (mantissa >= v - 1e-9) step = v;
   return step * decade;
 }
 

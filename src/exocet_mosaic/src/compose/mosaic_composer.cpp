@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 
@@ -63,6 +64,9 @@ struct OpenMosaic {
   cv::Matx33d last_composed_chain = cv::Matx33d::eye();
   bool pending = false;  // the last image is not composed (kept to compose it if the mosaic closes now)
   cv::Mat pending_image;
+  std::function<cv::Mat()> pending_load;  // or how to get it (not decoded unless the mosaic closes on it)
+  cv::Size pending_size;
+  int pending_channels = 0;
   cv::Matx33d pending_chain;
   std::vector<AnchorPoint> points;  // navigation points
   AnchorTie tie;                    // where the previous mosaic put the shared image (continued mosaics)
@@ -219,6 +223,27 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, c
   m.last_composed_chain = chain;
   m.pending = false;
   m.pending_image.release();
+  m.pending_load = nullptr;
+}
+
+/// The frame's image, from its loader when it has one. Empty (and *problem set) when the loader fails or its image
+/// does not have the announced shape.
+cv::Mat loadImage(const std::function<cv::Mat()>& load, const cv::Size& size, int channels, int index,
+                  std::string* problem) {
+  cv::Mat image;
+  try {
+    image = load();
+  } catch (const std::exception& e) {
+    *problem = "frame " + std::to_string(index) + " skipped: its image cannot be loaded: " + e.what();
+    return cv::Mat();
+  }
+  if (image.size() != size || image.channels() != channels || image.depth() != CV_8U) {
+    *problem = "frame " + std::to_string(index) + " skipped: its image is " + std::to_string(image.cols) + "x" +
+               std::to_string(image.rows) + "x" + std::to_string(image.channels()) + ", announced " +
+               std::to_string(size.width) + "x" + std::to_string(size.height) + "x" + std::to_string(channels);
+    return cv::Mat();
+  }
+  return image;
 }
 
 /// True if the image placed by chain moved enough since the last composed one to be a key frame.
@@ -232,25 +257,39 @@ bool isKeyFrame(const OpenMosaic& m, const cv::Matx33d& chain, const cv::Size& s
 
 }  // namespace
 
-std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
+std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
   Impl& s = *impl_;
   ++s.stats.frames_added;
-  if (frame.image.empty() || frame.image.depth() != CV_8U ||
-      (frame.image.channels() != 1 && frame.image.channels() != 3)) {
-    s.stats.last_problem = "frame " + std::to_string(frame.index) + " skipped: image must be CV_8UC1 or CV_8UC3";
+  ComposerFrame frame = given;  // a shallow copy: its image may be loaded below
+  const bool lazy = frame.image.empty() && frame.load_image;
+  const cv::Size image_size = lazy ? frame.image_size : frame.image.size();
+  const int image_channels = lazy ? frame.image_channels : frame.image.channels();
+  auto skip = [&](const std::string& problem) {
+    s.stats.last_problem = problem;
     ++s.stats.frames_skipped_no_chain;
     s.previous_in_chain = false;
     return std::nullopt;
-  }
-  if (config_.lighting.enabled && (s.stats.frames_added - 1) % config_.lighting.sample_interval_frames == 0)
-    s.lighting.observe(frame.image);
+  };
+  if (image_size.empty() || (image_channels != 1 && image_channels != 3) || (!lazy && frame.image.depth() != CV_8U))
+    return skip("frame " + std::to_string(frame.index) + " skipped: image must be CV_8UC1 or CV_8UC3");
+  // Loads a lazy frame's image (once); false when it cannot be had.
+  auto materialize = [&]() {
+    if (!frame.image.empty()) return true;
+    frame.image = loadImage(frame.load_image, image_size, image_channels, frame.index, &s.stats.last_problem);
+    return !frame.image.empty();
+  };
+  const bool lighting_sample =
+      config_.lighting.enabled && (s.stats.frames_added - 1) % config_.lighting.sample_interval_frames == 0;
+  // A frame that starts a mosaic is drawn: load it now, before any state changes.
+  if ((lighting_sample || !s.open) && !materialize()) return skip(s.stats.last_problem);
+  if (lighting_sample) s.lighting.observe(frame.image);
 
   // The pose's ground projection, relative to the open mosaic's origin (or absolute UTM when none is open).
   const Eigen::Vector2d origin = s.open ? s.open->ref_en_m : Eigen::Vector2d::Zero();
   cv::Matx33d p_frame;
   bool has_pose = false;
   if (frame.pose) {
-    has_pose = groundFromPixel(*frame.pose, frame.image.size(), origin, &p_frame);
+    has_pose = groundFromPixel(*frame.pose, image_size, origin, &p_frame);
     if (!has_pose)
       s.stats.last_problem = "frame " + std::to_string(frame.index) + ": pose does not see the seabed";
     else
@@ -286,7 +325,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
     return std::nullopt;
   }
 
-  const cv::Size size = frame.image.size();
+  const cv::Size size = image_size;
   const Eigen::Vector2d centre_px = imageCentre(size);
   std::optional<AnchorPoint> point;
   if (has_pose && !bridged) {
@@ -316,7 +355,8 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
       ++s.stats.navigation_jumps;
       std::optional<ClosedMosaic> closed = closeMosaic("navigation_jump");
       s.tie.valid = false;  // the navigation moved: start afresh at the new pose
-      if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame)) startMosaic(frame, false);
+      if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame) && materialize())
+        startMosaic(frame, false);
       return closed;
     } else {
       point = p;
@@ -339,11 +379,20 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
   }
   s.previous_in_chain = true;
   if (isKeyFrame(m, chain, size, config_.min_key_frame_shift_fraction)) {
-    composeImage(m, frame.image, chain, config_, s.lighting, s.feather, s.stats);
+    // A key frame whose image cannot be loaded is left out; the chain (from the registration) goes on.
+    if (materialize()) composeImage(m, frame.image, chain, config_, s.lighting, s.feather, s.stats);
   } else {
     m.pending = true;
-    frame.image.copyTo(m.pending_image);  // a copy: the caller may reuse its buffer
     m.pending_chain = chain;
+    if (!frame.image.empty()) {
+      frame.image.copyTo(m.pending_image);  // a copy: the caller may reuse its buffer
+      m.pending_load = nullptr;
+    } else {
+      m.pending_image.release();  // decoded only if the mosaic closes on this image
+      m.pending_load = frame.load_image;
+      m.pending_size = image_size;
+      m.pending_channels = image_channels;
+    }
   }
 
   std::string reason;
@@ -355,7 +404,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
     reason = "memory";
   if (reason.empty()) return std::nullopt;
   std::optional<ClosedMosaic> closed = closeMosaic(reason);
-  startMosaic(frame, true);  // the image also starts the next mosaic: consecutive tiles overlap
+  if (materialize()) startMosaic(frame, true);  // the image also starts the next mosaic: consecutive tiles overlap
   return closed;
 }
 
@@ -452,7 +501,10 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   std::unique_ptr<OpenMosaic> holder = std::move(s.open);
   OpenMosaic& m = *holder;
   // The last image before a close is always composed.
-  if (m.pending) composeImage(m, m.pending_image, m.pending_chain, config_, s.lighting, s.feather, s.stats);
+  if (m.pending && m.pending_image.empty() && m.pending_load)
+    m.pending_image = loadImage(m.pending_load, m.pending_size, m.pending_channels, m.last_frame, &s.stats.last_problem);
+  if (m.pending && !m.pending_image.empty())
+    composeImage(m, m.pending_image, m.pending_chain, config_, s.lighting, s.feather, s.stats);
   const cv::Rect region = m.canvas.dataBounds();
   if (region.empty()) return std::nullopt;
 

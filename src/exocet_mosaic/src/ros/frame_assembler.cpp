@@ -21,10 +21,13 @@ AssembledFrame* FrameAssembler::slot(std::int64_t stamp_ns, double now_s) {
   return &frame;
 }
 
-bool FrameAssembler::addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s) {
+bool FrameAssembler::addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s,
+                              cv::Size image_size, int image_channels) {
   AssembledFrame* frame = slot(stamp_ns, now_s);
   if (!frame) return false;
   frame->decode_image = std::move(decode_image);
+  frame->image_size = image_size;
+  frame->image_channels = image_channels;
   frame->image_arrival_s = now_s;
   return true;
 }

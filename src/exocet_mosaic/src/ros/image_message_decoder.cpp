@@ -9,12 +9,17 @@
 
 namespace exocet_mosaic {
 
-std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded) {
+std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded,
+                                  DecodeMode mode) {
   decoded->image.release();
   decoded->encoding.clear();
+  // JPEG's start-of-image marker: the data says what it is, whatever the format field claims.
+  const bool jpeg = message.data.size() > 2 && message.data[0] == 0xFF && message.data[1] == 0xD8;
+  const bool stored_bayer = message.format.find("bayer_") != std::string::npos;
+  const int flags = mode == DecodeMode::kGreyIfJpeg && jpeg && !stored_bayer ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED;
   cv::Mat image;
   try {
-    image = cv::imdecode(message.data, cv::IMREAD_UNCHANGED);
+    image = cv::imdecode(message.data, flags);
   } catch (const cv::Exception&) {
     image.release();
   }
@@ -66,6 +71,46 @@ cv::Mat to8Bit(const cv::Mat& image16) {
 }
 
 }  // namespace
+
+std::optional<DisplayShape> peekDisplayShape(const sensor_msgs::CompressedImage& message) {
+  const std::vector<uint8_t>& d = message.data;
+  const bool bayer = message.format.find("bayer_") != std::string::npos;
+  auto be16 = [&d](size_t i) { return (int(d[i]) << 8) | int(d[i + 1]); };
+  int width = 0, height = 0, stored_channels = 0;
+  if (d.size() > 4 && d[0] == 0xFF && d[1] == 0xD8) {
+    // JPEG: walk the marker segments to the start of frame (SOF0..SOF15 except DHT C4, JPG C8, DAC CC).
+    size_t i = 2;
+    while (i + 9 < d.size()) {
+      if (d[i] != 0xFF) return std::nullopt;
+      const uint8_t marker = d[i + 1];
+      if (marker == 0xFF) {  // fill byte
+        ++i;
+        continue;
+      }
+      if (marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC) {
+        height = be16(i + 5);
+        width = be16(i + 7);
+        stored_channels = d[i + 9];
+        break;
+      }
+      if (marker == 0xD9 || marker == 0xDA) return std::nullopt;  // end of image or scan before any frame header
+      i += 2 + be16(i + 2);
+    }
+  } else if (d.size() >= 26 && d[0] == 0x89 && d[1] == 'P' && d[2] == 'N' && d[3] == 'G') {
+    // PNG: IHDR is the first chunk: width, height (big endian), bit depth, colour type.
+    width = (be16(16) << 16) | be16(18);
+    height = (be16(20) << 16) | be16(22);
+    const int colour_type = d[25];
+    stored_channels = colour_type == 0 ? 1 : (colour_type == 4 ? 2 : 3);
+  }
+  if (width <= 0 || height <= 0 || stored_channels <= 0) return std::nullopt;
+  DisplayShape shape;
+  shape.size = cv::Size(width, height);
+  shape.channels = stored_channels == 1 && !bayer ? 1 : 3;
+  return shape;
+}
+
+int displayChannels(const std::string& encoding) { return encoding == "mono8" || encoding == "mono16" ? 1 : 3; }
 
 cv::Mat toDisplayImage(const cv::Mat& image, const std::string& encoding) {
   cv::Mat out;

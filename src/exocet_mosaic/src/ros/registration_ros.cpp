@@ -113,7 +113,7 @@ void RegistrationRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
 void RegistrationRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg) {
   if (!acceptTransport("compressed")) return;
   DecodedImage decoded;
-  const std::string error = decodeCompressedImage(*msg, &decoded);
+  const std::string error = decodeCompressedImage(*msg, &decoded, DecodeMode::kGreyIfJpeg);  // registers grey
   if (!error.empty()) {
     reject(error);
     return;

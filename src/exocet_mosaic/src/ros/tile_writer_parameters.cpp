@@ -12,7 +12,7 @@ namespace {
 
 void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
   p.readInt("frames_per_mosaic", &c->frames_per_mosaic, 2, 100000, "images per mosaic before it is closed");
-  p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0, "pixel size of the tiles (m), 0: native, rounded to 1-2-5");
+  p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0, "pixel size of the tiles (m), 0: native, rounded down to a preferred number (ISO 3 R'10)");
   p.readDouble("max_extent_m", &c->max_extent_m, 0.1, 100000.0, "east or north extent that closes a mosaic (m)");
   p.readDouble("max_memory_mb", &c->max_memory_mb, 1.0, 1000000.0, "memory of the open mosaic that closes it (MB)");
   p.readDouble("navigation_jump_sigma", &c->navigation_jump_sigma, 1.0, 1000.0,

@@ -136,20 +136,28 @@ void TileWriterRos::reject(const std::string& why) {
 
 void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
   if (!acceptTransport("raw")) return;
-  acceptImage(msg->header, [msg]() {
-    const cv_bridge::CvImageConstPtr shared = cv_bridge::toCvShare(msg);  // throws on a bad message
-    return toDisplayImage(shared->image, msg->encoding);
-  });
+  acceptImage(
+      msg->header,
+      [msg]() {
+        const cv_bridge::CvImageConstPtr shared = cv_bridge::toCvShare(msg);  // throws on a bad message
+        return toDisplayImage(shared->image, msg->encoding);
+      },
+      cv::Size(static_cast<int>(msg->width), static_cast<int>(msg->height)), displayChannels(msg->encoding));
 }
 
 void TileWriterRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg) {
   if (!acceptTransport("compressed")) return;
-  acceptImage(msg->header, [msg]() {
-    DecodedImage decoded;
-    const std::string error = decodeCompressedImage(*msg, &decoded);
-    if (!error.empty()) throw std::invalid_argument(error);
-    return toDisplayImage(decoded.image, decoded.encoding);
-  });
+  // The header gives the shape: the pixels are decoded only for the images the composer draws (about one in ten).
+  const std::optional<DisplayShape> shape = peekDisplayShape(*msg);
+  acceptImage(
+      msg->header,
+      [msg]() {
+        DecodedImage decoded;
+        const std::string error = decodeCompressedImage(*msg, &decoded);
+        if (!error.empty()) throw std::invalid_argument(error);
+        return toDisplayImage(decoded.image, decoded.encoding);
+      },
+      shape ? shape->size : cv::Size(), shape ? shape->channels : 0);
 }
 
 void TileWriterRos::checkClock(std::int64_t stamp_ns) {
@@ -166,7 +174,8 @@ void TileWriterRos::checkClock(std::int64_t stamp_ns) {
   if (!newest_stamp_ns_ || stamp_ns > *newest_stamp_ns_) newest_stamp_ns_ = stamp_ns;
 }
 
-void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode) {
+void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
+                                int image_channels) {
   ++images_;
   last_input_wall_ = ros::WallTime::now();
   received_input_ = true;
@@ -176,7 +185,9 @@ void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv
   }
   const std::int64_t stamp_ns = static_cast<std::int64_t>(header.stamp.toNSec());
   checkClock(stamp_ns);
-  addAndProcess([&](double now_s) { return assembler_.addImage(stamp_ns, std::move(decode), now_s); });
+  addAndProcess([&](double now_s) {
+    return assembler_.addImage(stamp_ns, std::move(decode), now_s, image_size, image_channels);
+  });
 }
 
 void TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
@@ -303,17 +314,8 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
   compose::ComposerFrame input;
   input.index = next_frame_index_++;
   input.stamp_s = static_cast<double>(frame.stamp_ns) * 1e-9;
-  try {
-    input.image = frame.decode_image();
-  } catch (const std::exception& e) {
-    reject(std::string("image cannot be used: ") + e.what());
-    return;
-  }
-  if (input.image.empty()) {
-    reject("empty image");
-    return;
-  }
   // The colour image must be undistorted as the registration undistorted its grey one.
+  std::shared_ptr<const registration::ImageUndistorter> undistorter;
   if (frame.motion && frame.motion->undistorted && config_.undistort && camera_info_) {
     const sensor_msgs::CameraInfo& info = *camera_info_;
     const cv::Size size(static_cast<int>(info.width), static_cast<int>(info.height));
@@ -322,10 +324,29 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
     std::copy(info.K.begin(), info.K.end(), k.begin());
     for (size_t i = 0; i < std::min<size_t>(5, info.D.size()); ++i) d[i] = info.D[i];
     try {
-      if (!undistorter_.sameCalibration(size, k, d)) undistorter_ = registration::ImageUndistorter(size, k, d);
-      if (undistorter_.active()) input.image = undistorter_.apply(input.image);
+      if (!undistorter_->sameCalibration(size, k, d))
+        undistorter_ = std::make_shared<const registration::ImageUndistorter>(size, k, d);
+      if (undistorter_->active()) undistorter = undistorter_;
     } catch (const std::invalid_argument& e) {
       reject(std::string("cannot undistort the image like the registration did: ") + e.what());
+    }
+  }
+  auto load = [decode = frame.decode_image, undistorter]() {
+    cv::Mat image = decode();  // throws what is wrong with the message
+    if (image.empty()) throw std::invalid_argument("empty image");
+    return undistorter ? undistorter->apply(image) : image;
+  };
+  if (!frame.image_size.empty() && frame.image_channels > 0) {
+    // Decoded only if the composer draws it.
+    input.load_image = load;
+    input.image_size = frame.image_size;
+    input.image_channels = frame.image_channels;
+  } else {
+    try {
+      input.image = load();
+    } catch (const std::exception& e) {
+      reject(std::string("image cannot be used: ") + e.what());
+      return;
     }
   }
   // The chain holds only between consecutive composed images.

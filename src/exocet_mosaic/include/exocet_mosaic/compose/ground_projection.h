@@ -47,7 +47,8 @@ cv::Matx33d normalizeHomography(const cv::Matx33d& h);
 /// Ground sample distance of the image centre at nadir: height / focal length (m per pixel).
 double nativeGsd(const CameraGroundPose& pose);
 
-/// Rounds a positive length DOWN to 1, 2 or 5 x 10^k (GIS-friendly pixel sizes), e.g. 0.0047 -> 0.002.
+/// Rounds a positive length DOWN to a preferred number (ISO 3 R'10: 1, 1.25, 1.6, 2, 2.5, 3.2, 4, 5, 6.3, 8 x 10^k),
+/// GIS-friendly pixel sizes within 25 % of the native one, e.g. 0.0047 -> 0.004, 0.0036 -> 0.0032.
 double roundGsdDown(double gsd_m);
 
 }  // namespace compose

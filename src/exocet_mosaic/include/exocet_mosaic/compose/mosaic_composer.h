@@ -23,6 +23,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -42,6 +43,13 @@ struct ComposerFrame {
   int index = -1;      ///< frame number (for the tile's metadata)
   double stamp_s = 0;  ///< acquisition time (s)
   cv::Mat image;       ///< CV_8UC3 BGR or CV_8UC1, undistorted
+  /// Instead of `image`, for images costly to decode (compressed streams): called only for the images the composer
+  /// draws (key frames, a mosaic's first and last) or samples for the lighting, at most once per frame. It must give
+  /// an image of image_size and image_channels; if it throws or gives another shape, the frame is skipped and the
+  /// problem reported in the stats.
+  std::function<cv::Mat()> load_image;
+  cv::Size image_size;     ///< with load_image
+  int image_channels = 0;  ///< with load_image: 1 or 3
   /// Registration: previous frame's px -> this frame's px; empty = failed / none.
   std::optional<cv::Matx33d> current_from_previous_px;
   std::optional<CameraGroundPose> pose;  ///< fused pose at this image; empty = not available

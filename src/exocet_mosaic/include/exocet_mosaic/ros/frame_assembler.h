@@ -39,6 +39,8 @@ struct PosePart {
 struct AssembledFrame {
   std::int64_t stamp_ns = 0;
   std::function<cv::Mat()> decode_image;  ///< empty: no image received for this stamp
+  cv::Size image_size;                    ///< of the decoded image, when known without decoding (else empty)
+  int image_channels = 0;                 ///< of the decoded image, when known without decoding (else 0)
   std::optional<MotionPart> motion;
   std::optional<PosePart> pose;
   std::optional<double> camera_height_m;
@@ -56,7 +58,9 @@ class FrameAssembler {
   FrameAssembler(double timeout_s, std::size_t max_pending);
 
   /// Each returns false when the stamp was already released (a late part, counted in lateParts()).
-  bool addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s);
+  /// image_size and image_channels: the decoded image's shape when the message tells it (else leave them empty).
+  bool addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s,
+                cv::Size image_size = cv::Size(), int image_channels = 0);
   bool addMotion(std::int64_t stamp_ns, const MotionPart& motion, double now_s);
   bool addPose(std::int64_t stamp_ns, const PosePart& pose, double now_s);
   bool addHeight(std::int64_t stamp_ns, double camera_height_m, double now_s);

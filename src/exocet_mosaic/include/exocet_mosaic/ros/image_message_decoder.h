@@ -5,6 +5,7 @@
  */
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include <opencv2/core.hpp>
@@ -18,12 +19,31 @@ struct DecodedImage {
   std::string encoding;
 };
 
+/// What the caller needs of a compressed image.
+enum class DecodeMode {
+  kAsStored,  ///< the stored channels (colour stays colour)
+  /// Grey is enough: a colour JPEG decodes only its luminance (libjpeg skips chroma upsampling and colour
+  /// conversion: about twice as fast), "mono8". PNG and Bayer images decode as stored.
+  kGreyIfJpeg,
+};
+
 /**
  * Decodes a CompressedImage (JPEG or PNG). The format field starts with the original encoding ("bgr8; jpeg
  * compressed bgr8"); a Bayer image compressed losslessly decodes to one channel and keeps its Bayer encoding.
  * @return an empty string, or what is wrong with the message (the image is then empty).
  */
-std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded);
+std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded,
+                                  DecodeMode mode = DecodeMode::kAsStored);
+
+/// Size and channels of the image toDisplayImage() would make of a compressed message, read from the JPEG or PNG
+/// header without decoding the pixels. Empty if the header cannot be read.
+struct DisplayShape {
+  cv::Size size;
+  int channels = 0;  ///< 1 (mono8, mono16) or 3 (colour, Bayer)
+};
+std::optional<DisplayShape> peekDisplayShape(const sensor_msgs::CompressedImage& message);
+/// Channels of toDisplayImage()'s image for a sensor_msgs encoding: 1 for mono8 and mono16, 3 for the others.
+int displayChannels(const std::string& encoding);
 
 /**
  * An 8-bit image for display and mosaics: CV_8UC3 BGR for colour and Bayer encodings, CV_8UC1 for mono8 and mono16

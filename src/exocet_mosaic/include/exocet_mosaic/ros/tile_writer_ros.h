@@ -66,7 +66,8 @@ class TileWriterRos {
   void onReconfigure(exocet_mosaic::TileWriterConfig& config, uint32_t level);
   bool onFlush(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool acceptTransport(const std::string& transport);
-  void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode);
+  void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
+                   int image_channels);
   void checkClock(std::int64_t stamp_ns);
   /// Adds a part to the assembler under the lock (add returns false for a late part), then composes what is ready.
   void addAndProcess(const std::function<bool(double now_s)>& add);
@@ -106,7 +107,9 @@ class TileWriterRos {
   int next_frame_index_ = 0;
   std::vector<double> tile_fused_sigmas_m_;  ///< fused 1-sigma of the open mosaic's images (m)
   sensor_msgs::CameraInfoConstPtr camera_info_;
-  registration::ImageUndistorter undistorter_;
+  // Shared with the loaders of images not decoded yet (the composer may decode one after a calibration change).
+  std::shared_ptr<const registration::ImageUndistorter> undistorter_ =
+      std::make_shared<const registration::ImageUndistorter>();
   std::optional<int> utm_zone_;
   bool northern_ = true;
   std::optional<Eigen::Vector2d> map_origin_en_m_;
