@@ -283,7 +283,18 @@ void TileWriterRos::onReconfigure(exocet_mosaic::TileWriterConfig& c, uint32_t) 
   next.lighting.enabled = c.lighting_enabled;
   const std::string error = next.validate();
   if (!error.empty()) {
-    ROS_ERROR("tile writer: reconfiguration refused: %s", error.c_str());
+    ROS_ERROR("tile writer: reconfiguration refused, keeping the settings in force: %s", error.c_str());
+    // Show the operator what is in force.
+    const compose::ComposerConfig& now = composer_.config();
+    c.frames_per_mosaic = now.frames_per_mosaic;
+    c.blend = now.blend;
+    c.feather_power = now.feather_power;
+    c.min_key_frame_shift_fraction = now.min_key_frame_shift_fraction;
+    c.max_extent_m = now.max_extent_m;
+    c.max_memory_mb = now.max_memory_mb;
+    c.navigation_jump_sigma = now.navigation_jump_sigma;
+    c.navigation_jump_min_m = now.navigation_jump_min_m;
+    c.lighting_enabled = now.lighting.enabled;
     return;
   }
   {
