@@ -98,6 +98,8 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                             "1-sigma of a dead reckoning that carries no covariance (m)");
   params.readDouble("reorder_delay_s", &c.reorder_delay_s, 0.0, 10.0,
                     "inputs are put in stamp order over this delay (s)");
+  params.readDouble("motion_wait_s", &c.motion_wait_s, 0.0, 60.0,
+                    "wall seconds the inputs wait for the image motion of an image seen on camera_info, 0: none");
   params.readPositiveDouble("clock_jump_s", &c.clock_jump_s, 1e6,
                             "a stamp older than the newest by more than this resets the filter (s)");
   params.readPositiveDouble("attitude_max_gap_s", &c.attitude_max_gap_s, 60.0,

@@ -142,6 +142,8 @@ void FusionRos::resetAll(const std::string& why) {
   image_only_en_m_.reset();
   last_dr_camera_en_m_.reset();
   have_stamp_ = false;
+  awaiting_motion_.clear();
+  newest_motion_stamp_s_ = -1e300;
   for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->poses.clear();
   // The operator's first point stands for the dive (no navigation): take it again.
   initializeFromParameters();
@@ -309,7 +311,17 @@ void FusionRos::enqueue(double stamp_s, std::function<void()> apply) {
 }
 
 void FusionRos::release(bool everything) {
-  while (!queue_.empty() && (everything || queue_.begin()->first <= newest_stamp_s_ - config_.reorder_delay_s)) {
+  // Images whose motion is overdue (dropped by the registration, or it stopped) hold nothing back any more.
+  const ros::SteadyTime now = ros::SteadyTime::now();
+  while (!awaiting_motion_.empty() && (everything || (now - awaiting_motion_.begin()->second).toSec() > config_.motion_wait_s)) {
+    if (!everything) ++motion_waits_timed_out_;
+    awaiting_motion_.erase(awaiting_motion_.begin());
+  }
+  auto due = [this](double stamp_s) {
+    return stamp_s <= newest_stamp_s_ - config_.reorder_delay_s &&
+           (awaiting_motion_.empty() || stamp_s < awaiting_motion_.begin()->first);
+  };
+  while (!queue_.empty() && (everything || due(queue_.begin()->first))) {
     auto apply = std::move(queue_.begin()->second);
     queue_.erase(queue_.begin());
     apply();
@@ -353,6 +365,12 @@ void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
     return;
   }
   camera_info_matrix_ = k;
+  // An image is on its way through the registration: what follows it waits for its motion.
+  const double t = msg->header.stamp.toSec();
+  if (motion_seen_ && config_.motion_wait_s > 0.0 && !msg->header.stamp.isZero() && t > newest_motion_stamp_s_) {
+    awaiting_motion_.emplace(t, ros::SteadyTime::now());
+    while (awaiting_motion_.size() > 5000) awaiting_motion_.erase(awaiting_motion_.begin());  // bounded
+  }
 }
 
 void FusionRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
@@ -509,8 +527,13 @@ void FusionRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
   if (!msg->header.frame_id.empty()) camera_frame_ = msg->header.frame_id;
   last_motion_wall_ = ros::WallTime::now();
   ++motions_;
+  motion_seen_ = true;
+  const double t = msg->header.stamp.toSec();
+  // The registration goes in image order: the images up to this one have their motion or never will.
+  newest_motion_stamp_s_ = std::max(newest_motion_stamp_s_, t);
+  awaiting_motion_.erase(awaiting_motion_.begin(), awaiting_motion_.upper_bound(t));
   const exocet_msgs::ImageMotion copy = *msg;
-  enqueue(msg->header.stamp.toSec(), [this, copy]() { applyMotion(copy); });
+  enqueue(t, [this, copy]() { applyMotion(copy); });
 }
 
 void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
@@ -823,6 +846,8 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
                                : std::string("unknown"));
   status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", filter_.config().gate_probability, filter_.config().gateThreshold());
   status.add("image motions", motions_);
+  status.add("images awaiting their motion", awaiting_motion_.size());
+  status.add("motion waits timed out", motion_waits_timed_out_);
   status.add("image motion failures", motion_failures_);
   status.add("dead reckoning messages", dead_reckonings_);
   status.add("fixes received", fixes_);

@@ -75,7 +75,9 @@ class FusionRos {
 
   /// Inputs reach the filter in stamp order: each is held until inputs ~reorder_delay_s newer have arrived (the
   /// registration's motion arrives after navigation stamped later), or until the inputs stop. Fixes later than that
-  /// go to the filter as out-of-sequence measurements.
+  /// go to the filter as out-of-sequence measurements. Once the registration runs, the images announced on
+  /// camera_info also hold back every later input until their motion arrives (or ~motion_wait_s of wall time): at
+  /// any replay speed the filter sees the image motion before the navigation that follows it.
   void enqueue(double stamp_s, std::function<void()> apply);
   void release(bool everything);
   void applyMotion(const exocet_msgs::ImageMotion& msg);
@@ -154,6 +156,10 @@ class FusionRos {
   std::optional<Eigen::Vector2d> pending_initial_en_m_;  ///< operator's first point, applied at the next input
   double pending_initial_sigma_m_ = 1.0;
   std::multimap<double, std::function<void()>> queue_;
+  std::map<double, ros::SteadyTime> awaiting_motion_;  ///< image stamps (camera_info) whose motion has not arrived
+  bool motion_seen_ = false;                            ///< the registration runs: images wait for their motion
+  double newest_motion_stamp_s_ = -1e300;
+  uint64_t motion_waits_timed_out_ = 0;
   ros::SteadyTime last_input_wall_;
   ros::SteadyTimer flush_timer_;
 
