@@ -44,9 +44,9 @@ struct FusionNodeConfig {
   double fix_sigma_m = 2.0;           ///< 1-sigma used when a fix carries no covariance (0, 1000] m
   double dead_reckoning_sigma_m = 0.5;  ///< 1-sigma used when the dead reckoning carries no covariance (0, 1000] m
   double reorder_delay_s = 0.3;       ///< inputs are put in stamp order over this delay [0, 10] s
-  /// Wall seconds [0, 60] the inputs wait for the registration's motion of an image announced by its camera_info
+  /// Wall seconds [0, 60] (the tile writer waits as long for its frames) the inputs wait for the registration's motion of an image announced by its camera_info
   /// (0: no wait). Replays faster than real time delay the motions by more than reorder_delay_s of sim time.
-  double motion_wait_s = 2.0;
+  double motion_wait_s = 10.0;
   double clock_jump_s = 10.0;         ///< a stamp older than the newest by more than this resets everything (0, 1e6]
   double attitude_max_gap_s = 0.5;    ///< attitude samples further apart are not interpolated (0, 60]
   double altitude_max_gap_s = 2.0;    ///< altimeter samples further apart are not interpolated (0, 600]
