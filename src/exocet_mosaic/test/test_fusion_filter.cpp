@@ -156,7 +156,8 @@ TEST(NavigationFilter, GatingRejectsAnOutlyingFixAndSaysSo) {
     }
   }
   const FilterState before = filter.current();
-  const UpdateResult r = filter.addAbsoluteFix(10.0, truth + Eigen::Vector2d(6.0, -4.0), 0.25 * Eigen::Matrix2d::Identity());
+  const UpdateResult r =
+      filter.addAbsoluteFix(10.0, truth + Eigen::Vector2d(6.0, -4.0), 0.25 * Eigen::Matrix2d::Identity());
   EXPECT_EQ(r.status, UpdateStatus::kRejectedByGate);
   EXPECT_GT(r.mahalanobis_sq, filter.config().gateThreshold());
   EXPECT_NE(r.detail.find("Mahalanobis^2"), std::string::npos) << r.detail;
@@ -171,7 +172,8 @@ TEST(NavigationFilter, GatingRejectsAnOutlyingFixAndSaysSo) {
 TEST(NavigationFilter, GatingChangedMidDiveAppliesToTheNextFix) {
   NavigationFilter filter{FilterConfig()};
   filter.initialize(0.0, Eigen::Vector2d(0.0, 0.0), 0.04 * Eigen::Matrix2d::Identity());
-  for (int k = 1; k <= 10; ++k) filter.addImageMotion((k - 1) * 0.2, k * 0.2, motionOf(Eigen::Vector2d(0.0, 0.0), 5e-4));
+  for (int k = 1; k <= 10; ++k)
+    filter.addImageMotion((k - 1) * 0.2, k * 0.2, motionOf(Eigen::Vector2d(0.0, 0.0), 5e-4));
   const Eigen::Matrix2d fix_cov = 0.25 * Eigen::Matrix2d::Identity();
   // An offset whose Mahalanobis^2 lies between the 0.999 gate (13.8) and the 0.999999 gate (27.6).
   const double sigma_m = std::sqrt(filter.current().P(0, 0) + 0.25);
@@ -265,7 +267,8 @@ TEST(NavigationFilter, TooOldFixIsReported) {
   config.history_s = 5.0;
   NavigationFilter filter(config);
   filter.initialize(100.0, Eigen::Vector2d(0.0, 0.0), 0.01 * Eigen::Matrix2d::Identity());
-  for (int k = 1; k <= 100; ++k) filter.addImageMotion(100.0 + (k - 1) * 0.2, 100.0 + k * 0.2, motionOf({0.05, 0.0}, 5e-4));
+  for (int k = 1; k <= 100; ++k)
+    filter.addImageMotion(100.0 + (k - 1) * 0.2, 100.0 + k * 0.2, motionOf({0.05, 0.0}, 5e-4));
   const FilterState before = filter.current();
   // The camera moves 0.25 m/s east: at 112 s it was at 3 m.
   const UpdateResult r = filter.addAbsoluteFix(112.0, Eigen::Vector2d(3.0, 0.0), 0.25 * Eigen::Matrix2d::Identity());

@@ -502,7 +502,8 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   OpenMosaic& m = *holder;
   // The last image before a close is always composed.
   if (m.pending && m.pending_image.empty() && m.pending_load)
-    m.pending_image = loadImage(m.pending_load, m.pending_size, m.pending_channels, m.last_frame, &s.stats.last_problem);
+    m.pending_image =
+        loadImage(m.pending_load, m.pending_size, m.pending_channels, m.last_frame, &s.stats.last_problem);
   if (m.pending && !m.pending_image.empty())
     composeImage(m, m.pending_image, m.pending_chain, config_, s.lighting, s.feather, s.stats);
   const cv::Rect region = m.canvas.dataBounds();

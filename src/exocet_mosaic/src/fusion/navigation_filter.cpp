@@ -25,7 +25,8 @@ Eigen::Matrix2d rotation2d(double angle_rad) {
 /// "" when the 2x2 covariance is finite, symmetric and positive definite; otherwise what is wrong.
 std::string covarianceProblem(const Eigen::Matrix2d& c, const char* name) {
   if (!c.allFinite()) return std::string(name) + " is not finite";
-  if (std::abs(c(0, 1) - c(1, 0)) > 1e-9 * (1.0 + c.cwiseAbs().maxCoeff())) return std::string(name) + " is not symmetric";
+  if (std::abs(c(0, 1) - c(1, 0)) > 1e-9 * (1.0 + c.cwiseAbs().maxCoeff()))
+    return std::string(name) + " is not symmetric";
   if (!(c(0, 0) > 0.0) || !(c(0, 0) * c(1, 1) - c(0, 1) * c(1, 0) > 0.0))
     return std::string(name) + " is not positive definite";
   return "";
@@ -114,11 +115,16 @@ void NavigationFilter::setGating(double gate_probability, int recovery_rejection
 
 std::string toString(UpdateStatus status) {
   switch (status) {
-    case UpdateStatus::kApplied: return "applied";
-    case UpdateStatus::kRejectedByGate: return "rejected_by_gate";
-    case UpdateStatus::kTooOld: return "too_old";
-    case UpdateStatus::kInvalid: return "invalid";
-    case UpdateStatus::kNotInitialized: return "not_initialized";
+    case UpdateStatus::kApplied:
+      return "applied";
+    case UpdateStatus::kRejectedByGate:
+      return "rejected_by_gate";
+    case UpdateStatus::kTooOld:
+      return "too_old";
+    case UpdateStatus::kInvalid:
+      return "invalid";
+    case UpdateStatus::kNotInitialized:
+      return "not_initialized";
   }
   return "unknown";
 }
@@ -280,8 +286,8 @@ UpdateResult NavigationFilter::addImageEvent(const Event& e) {
     return r;
   }
   if (!(e.previous_stamp_s < e.stamp_s)) {
-    r.detail = "image: previous_stamp_s " + stampText(e.previous_stamp_s) + " must be before stamp_s " +
-               stampText(e.stamp_s);
+    r.detail =
+        "image: previous_stamp_s " + stampText(e.previous_stamp_s) + " must be before stamp_s " + stampText(e.stamp_s);
     return r;
   }
   if (have_image_ && e.previous_stamp_s < last_image_stamp_s_) {
@@ -376,12 +382,12 @@ UpdateResult NavigationFilter::addAbsoluteFix(double stamp_s, const Eigen::Vecto
     r.detail = "fix: " + problem;
     return r;
   }
-  if (stamp_s < windowStart() || stamp_s < initial_stamp_s_ ||
-      stamp_s <= rewind_floor_s_) {
+  if (stamp_s < windowStart() || stamp_s < initial_stamp_s_ || stamp_s <= rewind_floor_s_) {
     r.status = UpdateStatus::kTooOld;
     r.detail = "fix: stamp " + stampText(stamp_s) + " is " + format(latestStamp() - stamp_s, 4) +
-               " s before the latest stamp " + stampText(latestStamp()) + ", older than history_s = " +
-               format(config_.history_s) + " s" + (stamp_s < initial_stamp_s_ ? " or the initialisation" : "");
+               " s before the latest stamp " + stampText(latestStamp()) +
+               ", older than history_s = " + format(config_.history_s) + " s" +
+               (stamp_s < initial_stamp_s_ ? " or the initialisation" : "");
     return r;
   }
   Event e;
@@ -409,10 +415,9 @@ UpdateResult NavigationFilter::insertAndProcess(Event* event, double affected_fr
   size_t first = 0;
   {
     const auto& steps = log_.steps;
-    auto it = std::upper_bound(steps.begin(), steps.end(), affected_from_s,
-                               [inclusive](double s, const FilterStep& step) {
-                                 return inclusive ? s <= step.stamp_s : s < step.stamp_s;
-                               });
+    auto it = std::upper_bound(
+        steps.begin(), steps.end(), affected_from_s,
+        [inclusive](double s, const FilterStep& step) { return inclusive ? s <= step.stamp_s : s < step.stamp_s; });
     first = static_cast<size_t>(it - steps.begin());
   }
   // Rewinding to before the first kept step is only possible from the initial state.
@@ -443,8 +448,8 @@ void NavigationFilter::processFrom(const Working& start, bool from_prior, uint64
   }
   bool first_step = from_prior;
   while (it != events_.end() || first_step) {
-    const double stamp = (it != events_.end() && !(first_step && it->stamp_s > start.stamp_s)) ? it->stamp_s
-                                                                                               : start.stamp_s;
+    const double stamp =
+        (it != events_.end() && !(first_step && it->stamp_s > start.stamp_s)) ? it->stamp_s : start.stamp_s;
     FilterStep step;
     step.stamp_s = stamp;
     step.transition = StateMatrix::Identity();
@@ -476,8 +481,7 @@ void NavigationFilter::processFrom(const Working& start, bool from_prior, uint64
 
 void NavigationFilter::predict(Working* w, double to_s, StateMatrix* transition) const {
   double u = w->stamp_s;
-  auto it = std::upper_bound(events_.begin(), events_.end(), u,
-                             [](double s, const Event& e) { return s < e.stamp_s; });
+  auto it = std::upper_bound(events_.begin(), events_.end(), u, [](double s, const Event& e) { return s < e.stamp_s; });
   for (; it != events_.end() && u < to_s; ++it) {
     if (it->kind != EventKind::kImage) continue;
     if (it->previous_stamp_s >= to_s) break;
@@ -518,8 +522,9 @@ void NavigationFilter::predictSegment(Working* w, double dt_s, double image_frac
     F.block<2, 1>(kEast, kPixelSize) = corrected;
     F.block<2, 1>(kEast, kHeading) = -scale * kJ * corrected;
     const Eigen::Matrix2d G_p = scale * A;
-    Q.block<2, 2>(kEast, kEast) += G_p * *motion_cov * G_p.transpose() +
-                                   image_fraction * std::pow(config_.image_step_noise_m, 2) * Eigen::Matrix2d::Identity();
+    Q.block<2, 2>(kEast, kEast) += G_p * *motion_cov * G_p.transpose() + image_fraction *
+                                                                             std::pow(config_.image_step_noise_m, 2) *
+                                                                             Eigen::Matrix2d::Identity();
     x.segment<2>(kEast) += dp;
     if (couple_dr) {
       const Eigen::Matrix2d I_minus_A = Eigen::Matrix2d::Identity() - A;
@@ -621,8 +626,8 @@ UpdateResult NavigationFilter::applyUpdate(Working* w, const Event& e, FilterSte
       w->dr_initialized = false;
       step->discontinuity = true;
       ++step->fixes_applied;
-      r.detail = "fix at " + stampText(e.stamp_s) + ": Mahalanobis^2 " + format(d2, 4) + " > gate " +
-                 format(gate, 4) + " for the " + std::to_string(config_.recovery_rejections) +
+      r.detail = "fix at " + stampText(e.stamp_s) + ": Mahalanobis^2 " + format(d2, 4) + " > gate " + format(gate, 4) +
+                 " for the " + std::to_string(config_.recovery_rejections) +
                  "th consecutive time: recovery, position re-anchored at the fix";
     } else {
       initialise_dr_offset();

@@ -53,8 +53,7 @@ bool FrameAssembler::addHeight(std::int64_t stamp_ns, double camera_height_m, do
   return true;
 }
 
-void FrameAssembler::release(std::map<std::int64_t, AssembledFrame>::iterator end,
-                             std::vector<AssembledFrame>* out) {
+void FrameAssembler::release(std::map<std::int64_t, AssembledFrame>::iterator end, std::vector<AssembledFrame>* out) {
   for (auto it = frames_.begin(); it != end;) {
     if (it->second.decode_image) out->push_back(std::move(it->second));
     last_released_ns_ = it->first;

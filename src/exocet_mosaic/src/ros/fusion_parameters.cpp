@@ -58,22 +58,20 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   const ParameterReader params(private_nh);
   readFilterConfig(ros::NodeHandle(private_nh, "filter"), &c.filter);
 
-  for (auto [name, topic] : {std::make_pair("motion_topic", &c.motion_topic),
-                             std::make_pair("odometry_topic", &c.odometry_topic),
-                             std::make_pair("nav_fix_topic", &c.nav_fix_topic),
-                             std::make_pair("usbl_topic", &c.usbl_topic), std::make_pair("imu_topic", &c.imu_topic),
-                             std::make_pair("altitude_topic", &c.altitude_topic),
-                             std::make_pair("camera_info_topic", &c.camera_info_topic),
-                             std::make_pair("datum_topic", &c.datum_topic)}) {
+  for (auto [name, topic] :
+       {std::make_pair("motion_topic", &c.motion_topic), std::make_pair("odometry_topic", &c.odometry_topic),
+        std::make_pair("nav_fix_topic", &c.nav_fix_topic), std::make_pair("usbl_topic", &c.usbl_topic),
+        std::make_pair("imu_topic", &c.imu_topic), std::make_pair("altitude_topic", &c.altitude_topic),
+        std::make_pair("camera_info_topic", &c.camera_info_topic), std::make_pair("datum_topic", &c.datum_topic)}) {
     params.readOptionalTopic(name, topic);  // "" turns an input off
   }
-  for (auto [name, topic] : {std::make_pair("odometry_out_topic", &c.odometry_out_topic),
-                             std::make_pair("path_topic", &c.path_topic),
-                             std::make_pair("navigation_path_topic", &c.navigation_path_topic),
-                             std::make_pair("image_path_topic", &c.image_path_topic),
-                             std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
-                             std::make_pair("camera_height_topic", &c.camera_height_topic),
-                             std::make_pair("datum_out_topic", &c.datum_out_topic)}) {
+  for (auto [name, topic] :
+       {std::make_pair("odometry_out_topic", &c.odometry_out_topic), std::make_pair("path_topic", &c.path_topic),
+        std::make_pair("navigation_path_topic", &c.navigation_path_topic),
+        std::make_pair("image_path_topic", &c.image_path_topic),
+        std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
+        std::make_pair("camera_height_topic", &c.camera_height_topic),
+        std::make_pair("datum_out_topic", &c.datum_out_topic)}) {
     params.readTopic(name, topic);
   }
   if (!c.odometry_topic.empty() && !c.nav_fix_topic.empty())
@@ -81,10 +79,10 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
         "parameters ~odometry_topic and ~nav_fix_topic are both set: give the dead reckoning in UTM (odometry) or in "
         "latitude/longitude (nav_fix), not both (set the other to \"\")");
 
-  for (auto [name, frame] : {std::make_pair("utm_frame", &c.utm_frame), std::make_pair("map_frame", &c.map_frame),
-                             std::make_pair("base_frame", &c.base_frame),
-                             std::make_pair("camera_frame", &c.camera_frame),
-                             std::make_pair("fused_camera_frame", &c.fused_camera_frame)})
+  for (auto [name, frame] :
+       {std::make_pair("utm_frame", &c.utm_frame), std::make_pair("map_frame", &c.map_frame),
+        std::make_pair("base_frame", &c.base_frame), std::make_pair("camera_frame", &c.camera_frame),
+        std::make_pair("fused_camera_frame", &c.fused_camera_frame)})
     params.readString(name, frame, {}, "tf frame name");
   params.readBool("publish_tf", &c.publish_tf, "publish map -> fused camera frame and utm -> map on tf");
   params.readPositiveDouble("map_origin_grid_m", &c.map_origin_grid_m, 1e6,
@@ -108,25 +106,26 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                             "altimeter samples further apart are not interpolated (s)");
 
   params.readDouble("initial_latitude_deg", &c.initial_latitude_deg, -90.0, 90.0,
-                     "first position's WGS 84 latitude (degrees), unset for none");
+                    "first position's WGS 84 latitude (degrees), unset for none");
   params.readDouble("initial_longitude_deg", &c.initial_longitude_deg, -180.0, 360.0,
-                     "first position's WGS 84 longitude (degrees), unset for none");
+                    "first position's WGS 84 longitude (degrees), unset for none");
   params.readDouble("initial_easting_m", &c.initial_easting_m, -1e7, 1e7,
-                     "first position's UTM easting (m), unset for none");
+                    "first position's UTM easting (m), unset for none");
   params.readDouble("initial_northing_m", &c.initial_northing_m, -1e7, 2e7,
-                     "first position's UTM northing (m), unset for none");
+                    "first position's UTM northing (m), unset for none");
   params.readDouble("initial_heading_deg", &c.initial_heading_deg, -360.0, 360.0,
-                     "first heading, clockwise from grid north (degrees), unset for the IMU's");
+                    "first heading, clockwise from grid north (degrees), unset for the IMU's");
   params.readDouble("initial_altitude_m", &c.initial_altitude_m, 1e-3, 1000.0,
-                     "camera height above the seabed without an altimeter (m), unset for none");
+                    "camera height above the seabed without an altimeter (m), unset for none");
   params.readPositiveDouble("initial_sigma_m", &c.initial_sigma_m, 10000.0, "1-sigma of the first position (m)");
   if (std::isfinite(c.initial_latitude_deg) != std::isfinite(c.initial_longitude_deg))
     throw std::invalid_argument("parameters ~initial_latitude_deg and ~initial_longitude_deg go together");
   if (std::isfinite(c.initial_easting_m) != std::isfinite(c.initial_northing_m))
     throw std::invalid_argument("parameters ~initial_easting_m and ~initial_northing_m go together");
   if (std::isfinite(c.initial_easting_m) && c.utm_zone == 0)
-    ROS_WARN("fusion: ~initial_easting_m/northing_m given without ~utm_zone: the zone will come from /nav/datum or "
-             "the first latitude/longitude");
+    ROS_WARN(
+        "fusion: ~initial_easting_m/northing_m given without ~utm_zone: the zone will come from /nav/datum or "
+        "the first latitude/longitude");
 
   params.readPositiveDouble("path_rate_hz", &c.path_rate_hz, 100.0, "rate at which the paths are republished (Hz)");
   params.readInt("max_path_poses", &c.max_path_poses, 100, 10000000, "poses per path before thinning");

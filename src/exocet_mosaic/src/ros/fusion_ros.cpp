@@ -78,7 +78,8 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   smoothed_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.smoothed_path_topic, 1, true);
   if (!config_.camera_height_topic.empty())
     camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
-  if (!config_.datum_out_topic.empty()) datum_pub_ = nh_.advertise<exocet_msgs::GeoDatum>(config_.datum_out_topic, 1, true);
+  if (!config_.datum_out_topic.empty())
+    datum_pub_ = nh_.advertise<exocet_msgs::GeoDatum>(config_.datum_out_topic, 1, true);
   initial_pose_srv_ = private_nh_.advertiseService("set_initial_pose", &FusionRos::onSetInitialPose, this);
   smooth_srv_ = private_nh_.advertiseService("smooth", &FusionRos::onSmooth, this);
   for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->header.frame_id = config_.map_frame;
@@ -87,8 +88,8 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   updater_.add("fusion", this, &FusionRos::diagnose);
   // Wall-clock timers: /diagnostics and the paths go on when a replay pauses or its clock jumps back.
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
-  diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  diagnostics_timer_ = nh_.createSteadyTimer(ros::WallDuration(period_s),
+                                             [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
   path_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0 / config_.path_rate_hz),
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
@@ -157,7 +158,9 @@ void FusionRos::rejectInput(const std::string& kind, const std::string& why) {
 
 void FusionRos::countResult(const std::string& kind, const fu::UpdateResult& result) {
   switch (result.status) {
-    case fu::UpdateStatus::kApplied: ++applied_[kind]; return;
+    case fu::UpdateStatus::kApplied:
+      ++applied_[kind];
+      return;
     case fu::UpdateStatus::kRejectedByGate:
       ++gated_[kind];
       last_problem_ = kind + " rejected by the gate: " + result.detail;
@@ -251,8 +254,8 @@ void FusionRos::initializeFromParameters() {
     operator_heading_rad_ = enuYawFromHeading_rad(c.initial_heading_deg * M_PI / 180.0);
   if (std::isfinite(c.initial_altitude_m)) operator_height_m_ = c.initial_altitude_m;
   if (std::isfinite(c.initial_latitude_deg) && std::isfinite(c.initial_longitude_deg)) {
-    pending_initial_en_m_ =
-        gridFor(c.initial_latitude_deg, c.initial_longitude_deg)->toGrid(c.initial_latitude_deg, c.initial_longitude_deg);
+    pending_initial_en_m_ = gridFor(c.initial_latitude_deg, c.initial_longitude_deg)
+                                ->toGrid(c.initial_latitude_deg, c.initial_longitude_deg);
   } else if (std::isfinite(c.initial_easting_m) && std::isfinite(c.initial_northing_m)) {
     pending_initial_en_m_ = Eigen::Vector2d(c.initial_easting_m, c.initial_northing_m);
   }
@@ -266,17 +269,20 @@ bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
     const bool latlon = std::isfinite(request.latitude_deg) && std::isfinite(request.longitude_deg);
     const bool grid = std::isfinite(request.easting_m) && std::isfinite(request.northing_m);
     if (latlon == grid)
-      throw std::invalid_argument("give either latitude_deg/longitude_deg or easting_m/northing_m (the other pair NaN)");
+      throw std::invalid_argument(
+          "give either latitude_deg/longitude_deg or easting_m/northing_m (the other pair NaN)");
     if (!(request.position_sigma_m > 0.0 && request.position_sigma_m <= 10000.0))
       throw std::invalid_argument("position_sigma_m must be in (0, 10000] m");
     if (std::isfinite(request.heading_deg) && !(request.heading_deg >= -360.0 && request.heading_deg <= 360.0))
       throw std::invalid_argument("heading_deg must be in [-360, 360] or NaN");
     if (!std::isnan(request.altitude_m) && !(request.altitude_m > 0.0 && request.altitude_m <= 1000.0))
       throw std::invalid_argument("altitude_m must be in (0, 1000] m or NaN");
-    const Eigen::Vector2d en = latlon ? gridFor(request.latitude_deg, request.longitude_deg)
-                                            ->toGrid(request.latitude_deg, request.longitude_deg)
-                                      : Eigen::Vector2d(request.easting_m, request.northing_m);
-    if (std::isfinite(request.heading_deg)) operator_heading_rad_ = enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0);
+    const Eigen::Vector2d en =
+        latlon
+            ? gridFor(request.latitude_deg, request.longitude_deg)->toGrid(request.latitude_deg, request.longitude_deg)
+            : Eigen::Vector2d(request.easting_m, request.northing_m);
+    if (std::isfinite(request.heading_deg))
+      operator_heading_rad_ = enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0);
     if (std::isfinite(request.altitude_m)) operator_height_m_ = request.altitude_m;
     pending_initial_en_m_ = en;
     pending_initial_sigma_m_ = request.position_sigma_m;
@@ -313,7 +319,8 @@ void FusionRos::enqueue(double stamp_s, std::function<void()> apply) {
 void FusionRos::release(bool everything) {
   // Images whose motion is overdue (dropped by the registration, or it stopped) hold nothing back any more.
   const ros::SteadyTime now = ros::SteadyTime::now();
-  while (!awaiting_motion_.empty() && (everything || (now - awaiting_motion_.begin()->second).toSec() > config_.motion_wait_s)) {
+  while (!awaiting_motion_.empty() &&
+         (everything || (now - awaiting_motion_.begin()->second).toSec() > config_.motion_wait_s)) {
     if (!everything) ++motion_waits_timed_out_;
     awaiting_motion_.erase(awaiting_motion_.begin());
   }
@@ -399,8 +406,8 @@ void FusionRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
     return;
   }
   if (msg->header.frame_id != config_.utm_frame) {
-    rejectInput("dead reckoning", "frame '" + msg->header.frame_id + "', expected the UTM frame '" +
-                                      config_.utm_frame + "' (parameter ~utm_frame)");
+    rejectInput("dead reckoning", "frame '" + msg->header.frame_id + "', expected the UTM frame '" + config_.utm_frame +
+                                      "' (parameter ~utm_frame)");
     return;
   }
   if (!admitStamp(msg->header.stamp, "dead reckoning", false)) return;
@@ -498,9 +505,9 @@ void FusionRos::onUsbl(const sensor_msgs::NavSatFixConstPtr& msg) {
     Eigen::Vector2d camera_en = fix_en;
     const auto attitude = attitudeAt(t);
     const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
-    const auto transponder = frame.empty() || frame == config_.base_frame ? std::optional<Eigen::Isometry3d>(
-                                                                                Eigen::Isometry3d::Identity())
-                                                                          : mountOf(frame);
+    const auto transponder = frame.empty() || frame == config_.base_frame
+                                 ? std::optional<Eigen::Isometry3d>(Eigen::Isometry3d::Identity())
+                                 : mountOf(frame);
     if (attitude && camera && transponder)
       camera_en += (attitude->toRotationMatrix() * (camera->translation() - transponder->translation())).head<2>();
     if (!filter_.initialized()) {
@@ -569,8 +576,8 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
     return;
   }
   const Eigen::VectorXd parameters = Eigen::Map<const Eigen::VectorXd>(msg.parameters.data(), n);
-  const Eigen::MatrixXd covariance = Eigen::Map<const Eigen::Matrix<double, -1, -1, Eigen::RowMajor>>(
-      msg.covariance.data(), n, n);
+  const Eigen::MatrixXd covariance =
+      Eigen::Map<const Eigen::Matrix<double, -1, -1, Eigen::RowMajor>>(msg.covariance.data(), n, n);
   if (!finite(parameters) || !finite(covariance)) {
     fail("image motion", "non-finite parameters or covariance");
     return;
@@ -594,7 +601,8 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
 
   // Attitude at both stamps: the sensors', or the operator's heading carried on by the image rotation.
   std::optional<Eigen::Quaterniond> q0 = attitudeAt(t0), q1 = attitudeAt(t1);
-  const Eigen::Matrix3d pixel_matrix = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
+  const Eigen::Matrix3d pixel_matrix =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
   double yaw_change_rad = 0.0;
   if ((!q0 || !q1) && operator_heading_rad_) {
     yaw_change_rad = fu::yawChangeFromImageMotion_rad(pixel_matrix, k, mount.base_from_camera);
@@ -844,21 +852,23 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.add("initialised", filter_.initialized());
   status.add("utm zone", grid_ ? grid_->name() + " (EPSG " + std::to_string(grid_->epsg()) + ") from " + grid_source_
                                : std::string("unknown"));
-  status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", filter_.config().gate_probability, filter_.config().gateThreshold());
+  status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", filter_.config().gate_probability,
+              filter_.config().gateThreshold());
   status.add("image motions", motions_);
   status.add("images awaiting their motion", awaiting_motion_.size());
   status.add("motion waits timed out", motion_waits_timed_out_);
   status.add("image motion failures", motion_failures_);
   status.add("dead reckoning messages", dead_reckonings_);
   status.add("fixes received", fixes_);
-  for (const auto& [name, counts] : {std::make_pair("applied", &applied_), std::make_pair("gated", &gated_),
-                                     std::make_pair("too old", &too_old_), std::make_pair("invalid", &invalid_),
-                                     std::make_pair("rejected inputs", &rejected_inputs_)})
+  for (const auto& [name, counts] :
+       {std::make_pair("applied", &applied_), std::make_pair("gated", &gated_), std::make_pair("too old", &too_old_),
+        std::make_pair("invalid", &invalid_), std::make_pair("rejected inputs", &rejected_inputs_)})
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
   status.add("last problem", last_problem_);
   if (!filter_.initialized()) {
-    status.summary(DiagnosticStatus::WARN, "waiting for a first position (navigation, ~initial_* or ~set_initial_pose)");
+    status.summary(DiagnosticStatus::WARN,
+                   "waiting for a first position (navigation, ~initial_* or ~set_initial_pose)");
     return;
   }
   const fu::FilterState s = filter_.current();
@@ -871,7 +881,8 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   if (sigma_m > config_.max_position_sigma_m)
     status.summary(DiagnosticStatus::WARN, "position uncertain: 1-sigma " + std::to_string(sigma_m) + " m");
   else if (expects_navigation && dead_reckonings_ > 0 && nav_silence_s > config_.max_navigation_silence_s)
-    status.summary(DiagnosticStatus::WARN, "no navigation for " + std::to_string(static_cast<int>(nav_silence_s)) + " s");
+    status.summary(DiagnosticStatus::WARN,
+                   "no navigation for " + std::to_string(static_cast<int>(nav_silence_s)) + " s");
   else if (total(rejected_inputs_) + total(invalid_) > 0 && !last_problem_.empty())
     status.summary(DiagnosticStatus::OK, "fusing; some inputs rejected (see last problem)");
   else

@@ -9,14 +9,14 @@
 
 namespace exocet_mosaic {
 
-std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded,
-                                  DecodeMode mode) {
+std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded, DecodeMode mode) {
   decoded->image.release();
   decoded->encoding.clear();
   // JPEG's start-of-image marker: the data says what it is, whatever the format field claims.
   const bool jpeg = message.data.size() > 2 && message.data[0] == 0xFF && message.data[1] == 0xD8;
   const bool stored_bayer = message.format.find("bayer_") != std::string::npos;
-  const int flags = mode == DecodeMode::kGreyIfJpeg && jpeg && !stored_bayer ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED;
+  const int flags =
+      mode == DecodeMode::kGreyIfJpeg && jpeg && !stored_bayer ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED;
   cv::Mat image;
   try {
     image = cv::imdecode(message.data, flags);

@@ -7,8 +7,8 @@
 #include <stdexcept>
 
 #include <cv_bridge/cv_bridge.h>
-#include <image_transport/camera_common.h>
 #include <exocet_msgs/ImageMotion.h>
+#include <image_transport/camera_common.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "exocet_mosaic/ros/image_message_decoder.h"
@@ -53,8 +53,8 @@ RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     raw_subscriber_ = image_transport_.subscribe(config_.image_topic, config_.queue_size, &RegistrationRos::onImage,
                                                  this, image_transport::TransportHints("raw"));
   if (config_.transport != "raw")
-    compressed_subscriber_ = nh_.subscribe(config_.image_topic + "/compressed", config_.queue_size,
-                                           &RegistrationRos::onCompressed, this);
+    compressed_subscriber_ =
+        nh_.subscribe(config_.image_topic + "/compressed", config_.queue_size, &RegistrationRos::onCompressed, this);
 
   camera_info_subscriber_ = nh_.subscribe(config_.camera_info_topic, 5, &RegistrationRos::onCameraInfo, this);
 
@@ -67,10 +67,10 @@ RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   updater_.add("registration", this, &RegistrationRos::diagnose);
   // Wall-clock timer: /diagnostics goes on when a replay pauses or its clock jumps back.
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
-  diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period_s), [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
-  reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::RegistrationConfig>>(
-      reconfigure_mutex_, private_nh_);
+  diagnostics_timer_ = nh_.createSteadyTimer(ros::WallDuration(period_s),
+                                             [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  reconfigure_server_ =
+      std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::RegistrationConfig>>(reconfigure_mutex_, private_nh_);
   exocet_mosaic::RegistrationConfig start;
   start.method = reg::toString(config_.registration.method);
   start.model = reg::toString(config_.registration.model);
@@ -121,9 +121,7 @@ void RegistrationRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& m
   process(decoded.image, decoded.encoding, msg->header);
 }
 
-void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
-  camera_info_ = msg;
-}
+void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) { camera_info_ = msg; }
 
 void RegistrationRos::reject(const std::string& why) {
   ++rejected_;
@@ -251,8 +249,8 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
       why << "gap of " << period_s << " s between images exceeds ~max_gap_s = " << config_.max_gap_s << " s";
       restart(why.str());
     } else if (gray.size() != previous_size_) {
-      why << "image size changed from " << previous_size_.width << "x" << previous_size_.height << " to "
-          << gray.cols << "x" << gray.rows;
+      why << "image size changed from " << previous_size_.width << "x" << previous_size_.height << " to " << gray.cols
+          << "x" << gray.rows;
       restart(why.str());
     } else if (!last_motion_.failed && previous_period_s_ > 0.0) {
       // Constant velocity: the previous motion scaled to this interval bridges dropped frames.

@@ -12,7 +12,8 @@ namespace {
 
 void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
   p.readInt("frames_per_mosaic", &c->frames_per_mosaic, 2, 100000, "images per mosaic before it is closed");
-  p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0, "pixel size of the tiles (m), 0: native, rounded down to a preferred number (ISO 3 R'10)");
+  p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0,
+               "pixel size of the tiles (m), 0: native, rounded down to a preferred number (ISO 3 R'10)");
   p.readDouble("max_extent_m", &c->max_extent_m, 0.1, 100000.0, "east or north extent that closes a mosaic (m)");
   p.readDouble("max_memory_mb", &c->max_memory_mb, 1.0, 1000000.0, "memory of the open mosaic that closes it (MB)");
   p.readDouble("navigation_jump_sigma", &c->navigation_jump_sigma, 1.0, 1000.0,
@@ -29,7 +30,8 @@ void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
   p.readString("anchor", &c->anchor, {"similarity", "translation"}, "fit of the chain to the fused navigation");
   p.readDouble("tile_continuity_sigma_m", &c->tile_continuity_sigma_m, 0.0, 1000.0,
                "how strongly a tile is tied to the previous one where they share an image (m)");
-  p.readBool("lighting/enabled", &c->lighting.enabled, "correct the lamp cone and vignetting estimated from the images");
+  p.readBool("lighting/enabled", &c->lighting.enabled,
+             "correct the lamp cone and vignetting estimated from the images");
   p.readInt("lighting/warmup_frames", &c->lighting.warmup_frames, 1, 100000, "images averaged before correcting");
   p.readInt("lighting/memory_frames", &c->lighting.memory_frames, 1, 10000000,
             "time constant of the lighting field's running average (images)");

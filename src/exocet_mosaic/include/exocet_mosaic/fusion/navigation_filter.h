@@ -80,19 +80,19 @@ struct FilterConfig {
   double no_motion_speed_mps = 0.5;
 
   // --- Pixel-size correction c ---
-  double initial_pixel_size_correction_sigma = 0.02;  ///< 1-sigma at initialisation (relative, >= 0)
+  double initial_pixel_size_correction_sigma = 0.02;     ///< 1-sigma at initialisation (relative, >= 0)
   double pixel_size_correction_noise_per_sqrt_s = 1e-4;  ///< random walk (1/sqrt(s), >= 0)
 
   // --- Heading error of the attitude ---
-  double initial_heading_sigma_rad = 0.02;        ///< 1-sigma at initialisation (rad, >= 0)
-  double initial_heading_drift_sigma_rps = 2e-4;  ///< 1-sigma of the gyro bias at initialisation (rad/s, >= 0)
-  double heading_noise_rad_per_sqrt_s = 1e-4;     ///< angle random walk (rad/sqrt(s), >= 0)
+  double initial_heading_sigma_rad = 0.02;           ///< 1-sigma at initialisation (rad, >= 0)
+  double initial_heading_drift_sigma_rps = 2e-4;     ///< 1-sigma of the gyro bias at initialisation (rad/s, >= 0)
+  double heading_noise_rad_per_sqrt_s = 1e-4;        ///< angle random walk (rad/sqrt(s), >= 0)
   double heading_drift_noise_rps_per_sqrt_s = 2e-5;  ///< bias instability (rad/s/sqrt(s), >= 0)
 
   // --- Dead reckoning ---
-  double dr_measurement_sigma_m = 0.01;      ///< white noise of one DR position, each axis (m, > 0)
-  double dr_offset_noise_m2_per_m = 1e-3;    ///< DR offset random walk per metre travelled (m^2/m, >= 0)
-  double dr_offset_noise_m2_per_s = 1e-6;    ///< DR offset random walk per second (m^2/s, >= 0)
+  double dr_measurement_sigma_m = 0.01;    ///< white noise of one DR position, each axis (m, > 0)
+  double dr_offset_noise_m2_per_m = 1e-3;  ///< DR offset random walk per metre travelled (m^2/m, >= 0)
+  double dr_offset_noise_m2_per_s = 1e-6;  ///< DR offset random walk per second (m^2/s, >= 0)
   /// The DR's heading comes from the same gyro as the attitude used for the images (the usual ROV set-up, and the
   /// simulator's): its heading error moves the DR offset through psi (see the file comment).
   bool dr_shares_heading = true;
@@ -150,7 +150,8 @@ class NavigationFilter {
   UpdateResult addImageFailure(double previous_stamp_s, double stamp_s);
   /// Dead-reckoning camera centre (UTM) at stamp_s; its reported covariance (m^2) must be finite and positive
   /// definite (it is not used as measurement noise, see the file comment).
-  UpdateResult addDeadReckoning(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+  UpdateResult addDeadReckoning(double stamp_s, const Eigen::Vector2d& camera_en_m,
+                                const Eigen::Matrix2d& covariance_m2);
   /// Absolute fix (USBL) of the camera centre, stamped at measurement time (it may arrive late).
   UpdateResult addAbsoluteFix(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
 
@@ -178,8 +179,8 @@ class NavigationFilter {
   struct Event {
     EventKind kind = EventKind::kImage;
     double stamp_s = 0.0;
-    double previous_stamp_s = 0.0;  ///< images: start of the interval
-    bool image_failed = false;      ///< images: registration failed (no motion over the interval)
+    double previous_stamp_s = 0.0;                    ///< images: start of the interval
+    bool image_failed = false;                        ///< images: registration failed (no motion over the interval)
     Eigen::Vector2d value = Eigen::Vector2d::Zero();  ///< image displacement, DR or fix position (m)
     Eigen::Matrix2d covariance = Eigen::Matrix2d::Zero();
     uint64_t sequence = 0;  ///< arrival order, to order same-kind events at one stamp

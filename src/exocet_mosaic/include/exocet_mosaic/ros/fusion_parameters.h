@@ -18,61 +18,62 @@ struct FusionNodeConfig {
   fusion::FilterConfig filter;  ///< ~filter/...: noise, gating, history (see navigation_filter.h)
 
   // Inputs. An empty topic disables that input.
-  std::string motion_topic = topics::kMosaicMotion;         ///< exocet_msgs/ImageMotion
-  std::string odometry_topic = topics::kNavOdometry;        ///< nav_msgs/Odometry, dead reckoning in the UTM grid
-  std::string nav_fix_topic;                                ///< sensor_msgs/NavSatFix, dead reckoning in lat/lon
-  std::string usbl_topic = topics::kNavUsbl;                ///< sensor_msgs/NavSatFix, absolute fixes (late)
-  std::string imu_topic = topics::kNavImu;                  ///< sensor_msgs/Imu: attitude, ENU
-  std::string altitude_topic = topics::kNavAltitude;        ///< sensor_msgs/Range: altimeter
-  std::string camera_info_topic = topics::kCameraInfo;      ///< K when a motion message carries none
-  std::string datum_topic = topics::kNavDatum;              ///< exocet_msgs/GeoDatum: the dive's UTM zone
+  std::string motion_topic = topics::kMosaicMotion;     ///< exocet_msgs/ImageMotion
+  std::string odometry_topic = topics::kNavOdometry;    ///< nav_msgs/Odometry, dead reckoning in the UTM grid
+  std::string nav_fix_topic;                            ///< sensor_msgs/NavSatFix, dead reckoning in lat/lon
+  std::string usbl_topic = topics::kNavUsbl;            ///< sensor_msgs/NavSatFix, absolute fixes (late)
+  std::string imu_topic = topics::kNavImu;              ///< sensor_msgs/Imu: attitude, ENU
+  std::string altitude_topic = topics::kNavAltitude;    ///< sensor_msgs/Range: altimeter
+  std::string camera_info_topic = topics::kCameraInfo;  ///< K when a motion message carries none
+  std::string datum_topic = topics::kNavDatum;          ///< exocet_msgs/GeoDatum: the dive's UTM zone
 
   // Frames.
-  std::string utm_frame = frames::kUtm;                 ///< frame of the odometry output and UTM inputs
-  std::string map_frame = frames::kMap;                 ///< local frame for rviz (utm -> map is a fixed offset)
-  std::string base_frame = frames::kBaseLink;           ///< the vehicle body
-  std::string camera_frame = frames::kCameraOptical;    ///< the camera, when a motion message names no frame
-  std::string fused_camera_frame = "camera_fused";      ///< child frame of the published odometry and tf
-  bool publish_tf = true;                               ///< map -> fused_camera_frame, and utm -> map (static)
-  double map_origin_grid_m = 100.0;                     ///< the map origin is the first position rounded to this (m)
+  std::string utm_frame = frames::kUtm;               ///< frame of the odometry output and UTM inputs
+  std::string map_frame = frames::kMap;               ///< local frame for rviz (utm -> map is a fixed offset)
+  std::string base_frame = frames::kBaseLink;         ///< the vehicle body
+  std::string camera_frame = frames::kCameraOptical;  ///< the camera, when a motion message names no frame
+  std::string fused_camera_frame = "camera_fused";    ///< child frame of the published odometry and tf
+  bool publish_tf = true;                             ///< map -> fused_camera_frame, and utm -> map (static)
+  double map_origin_grid_m = 100.0;                   ///< the map origin is the first position rounded to this (m)
 
   // Geography: the UTM zone, when neither /nav/datum nor a latitude/longitude gives it. 0 = not given.
-  int utm_zone = 0;                   ///< [0, 60]; 0: not given
+  int utm_zone = 0;  ///< [0, 60]; 0: not given
   bool northern_hemisphere = true;
 
   // Navigation inputs.
-  double fix_sigma_m = 2.0;           ///< 1-sigma used when a fix carries no covariance (0, 1000] m
+  double fix_sigma_m = 2.0;             ///< 1-sigma used when a fix carries no covariance (0, 1000] m
   double dead_reckoning_sigma_m = 0.5;  ///< 1-sigma used when the dead reckoning carries no covariance (0, 1000] m
-  double reorder_delay_s = 0.3;       ///< inputs are put in stamp order over this delay [0, 10] s
-  /// Wall seconds [0, 60] (the tile writer waits as long for its frames) the inputs wait for the registration's motion of an image announced by its camera_info
-  /// (0: no wait). Replays faster than real time delay the motions by more than reorder_delay_s of sim time.
+  double reorder_delay_s = 0.3;         ///< inputs are put in stamp order over this delay [0, 10] s
+  /// Wall seconds [0, 60] (the tile writer waits as long for its frames) the inputs wait for the registration's motion
+  /// of an image announced by its camera_info (0: no wait). Replays faster than real time delay the motions by more
+  /// than reorder_delay_s of sim time.
   double motion_wait_s = 10.0;
-  double clock_jump_s = 10.0;         ///< a stamp older than the newest by more than this resets everything (0, 1e6]
-  double attitude_max_gap_s = 0.5;    ///< attitude samples further apart are not interpolated (0, 60]
-  double altitude_max_gap_s = 2.0;    ///< altimeter samples further apart are not interpolated (0, 600]
+  double clock_jump_s = 10.0;       ///< a stamp older than the newest by more than this resets everything (0, 1e6]
+  double attitude_max_gap_s = 0.5;  ///< attitude samples further apart are not interpolated (0, 60]
+  double altitude_max_gap_s = 2.0;  ///< altimeter samples further apart are not interpolated (0, 600]
 
   // No navigation: the operator's first point (NaN = not given); also settable through ~set_initial_pose.
   double initial_latitude_deg = NAN, initial_longitude_deg = NAN;
   double initial_easting_m = NAN, initial_northing_m = NAN;
-  double initial_heading_deg = NAN;   ///< grid heading, clockwise from north [0, 360)
-  double initial_altitude_m = NAN;    ///< camera height above the seabed (0, 1000] m
-  double initial_sigma_m = 1.0;       ///< (0, 10000] m
+  double initial_heading_deg = NAN;  ///< grid heading, clockwise from north [0, 360)
+  double initial_altitude_m = NAN;   ///< camera height above the seabed (0, 1000] m
+  double initial_sigma_m = 1.0;      ///< (0, 10000] m
 
   // Outputs.
   std::string odometry_out_topic = "/mosaic/odometry";
-  std::string path_topic = "/mosaic/path";                      ///< fused track
+  std::string path_topic = "/mosaic/path";                        ///< fused track
   std::string navigation_path_topic = "/mosaic/path_navigation";  ///< dead reckoning as received
-  std::string image_path_topic = "/mosaic/path_image";          ///< image motion alone from the first position
-  std::string smoothed_path_topic = "/mosaic/path_smoothed";    ///< RTS smoother, on ~smooth
+  std::string image_path_topic = "/mosaic/path_image";            ///< image motion alone from the first position
+  std::string smoothed_path_topic = "/mosaic/path_smoothed";      ///< RTS smoother, on ~smooth
   /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs
-  double path_rate_hz = 1.0;           ///< paths are republished at this rate (0, 100]
-  int max_path_poses = 20000;          ///< beyond, every other pose is dropped (bounded memory) [100, 1e7]
-  bool keep_smoother_log = true;       ///< keep the whole dive for the RTS smoother (memory grows with the dive)
-  std::string track_csv;               ///< written at shutdown: the filtered track (empty: not written)
-  std::string smoothed_track_csv;      ///< written at shutdown: the RTS-smoothed track (empty: not written)
-  double max_position_sigma_m = 10.0;  ///< /diagnostics warns above this 1-sigma (0, 1e6] m
+  double path_rate_hz = 1.0;                      ///< paths are republished at this rate (0, 100]
+  int max_path_poses = 20000;                     ///< beyond, every other pose is dropped (bounded memory) [100, 1e7]
+  bool keep_smoother_log = true;           ///< keep the whole dive for the RTS smoother (memory grows with the dive)
+  std::string track_csv;                   ///< written at shutdown: the filtered track (empty: not written)
+  std::string smoothed_track_csv;          ///< written at shutdown: the RTS-smoothed track (empty: not written)
+  double max_position_sigma_m = 10.0;      ///< /diagnostics warns above this 1-sigma (0, 1e6] m
   double max_navigation_silence_s = 10.0;  ///< /diagnostics warns when no navigation arrived for this long (0, 1e6]
 };
 

@@ -152,12 +152,12 @@ class FusionRos {
   std::map<std::string, Eigen::Isometry3d> mounts_;
   std::optional<double> operator_heading_rad_;  ///< ENU yaw carried by the images when no attitude sensor speaks
   std::optional<double> operator_height_m_;
-  std::string camera_frame_;  ///< the motion messages' frame (the camera's optical frame)
+  std::string camera_frame_;                             ///< the motion messages' frame (the camera's optical frame)
   std::optional<Eigen::Vector2d> pending_initial_en_m_;  ///< operator's first point, applied at the next input
   double pending_initial_sigma_m_ = 1.0;
   std::multimap<double, std::function<void()>> queue_;
   std::map<double, ros::SteadyTime> awaiting_motion_;  ///< image stamps (camera_info) whose motion has not arrived
-  bool motion_seen_ = false;                            ///< the registration runs: images wait for their motion
+  bool motion_seen_ = false;                           ///< the registration runs: images wait for their motion
   double newest_motion_stamp_s_ = -1e300;
   uint64_t motion_waits_timed_out_ = 0;
   ros::SteadyTime last_input_wall_;

@@ -8,8 +8,8 @@
 #include <optional>
 #include <string>
 
-#include <opencv2/core.hpp>
 #include <sensor_msgs/CompressedImage.h>
+#include <opencv2/core.hpp>
 
 namespace exocet_mosaic {
 

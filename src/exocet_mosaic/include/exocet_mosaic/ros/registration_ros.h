@@ -22,15 +22,15 @@
 
 #include "exocet_mosaic/registration/gray_converter.h"
 #include "exocet_mosaic/registration/image_undistorter.h"
-#include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_mosaic/registration/registration_config.h"
+#include "exocet_mosaic/ros/dive_topics.h"
 
 namespace exocet_mosaic {
 
 /// Settings of the registration node; each is the private parameter of the same name (see readRegistrationNodeConfig).
 struct RegistrationNodeConfig {
   registration::RegistrationConfig registration;  ///< ~method, ~model, ~klt/..., ~rmr/...
-  std::string image_topic = topics::kImageRaw;  ///< sensor_msgs/Image; `<image_topic>/compressed` is also watched
+  std::string image_topic = topics::kImageRaw;    ///< sensor_msgs/Image; `<image_topic>/compressed` is also watched
   /// auto: the first of raw (image_transport) and `<image_topic>/compressed` that delivers; raw; compressed. The
   /// compressed topic is decoded here because Debian's ROS has no compressed_image_transport plugin.
   std::string transport = "auto";
@@ -40,10 +40,10 @@ struct RegistrationNodeConfig {
   /// Undistort the images with the camera_info's plumb_bob coefficients before registering them (the motion
   /// between two views of a flat seabed is a homography only without distortion).
   bool undistort = true;
-  double max_gap_s = 1.0;          ///< a longer gap between two images restarts the sequence (0, 3600] s
-  int queue_size = 30;             ///< subscriber queue (images) [1, 1000]
-  double expected_rate_hz = 0.0;   ///< nominal camera rate for /diagnostics, 0 = unknown [0, 1000]
-  int quality_window = 50;         ///< pairs over which /diagnostics computes the failure fraction [5, 10000]
+  double max_gap_s = 1.0;              ///< a longer gap between two images restarts the sequence (0, 3600] s
+  int queue_size = 30;                 ///< subscriber queue (images) [1, 1000]
+  double expected_rate_hz = 0.0;       ///< nominal camera rate for /diagnostics, 0 = unknown [0, 1000]
+  int quality_window = 50;             ///< pairs over which /diagnostics computes the failure fraction [5, 10000]
   double warn_failure_fraction = 0.2;  ///< above it, /diagnostics warns; above 4x (capped at 0.8), error (0, 1]
 };
 
