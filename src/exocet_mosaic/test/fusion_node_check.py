@@ -22,7 +22,7 @@ from exocet_msgs.msg import ImageMotion
 from exocet_msgs.srv import SetInitialPose
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
+from sensor_msgs.msg import CameraInfo, Imu, NavSatFix, NavSatStatus, Range
 from tf2_msgs.msg import TFMessage
 
 from exocet_mosaic.testing import lat_lon_to_utm, utm_to_lat_lon
@@ -297,6 +297,88 @@ class FusionNodeTest(unittest.TestCase):
         sigmas = [math.sqrt(o.pose.covariance[0] + o.pose.covariance[7]) for o in self.nonav_odometry]
         self.assertGreater(sigmas[-1], sigmas[0], 'the uncertainty grows with image motion alone')
         self.assertTrue(all(b >= a - 1e-9 for a, b in zip(sigmas, sigmas[1:])), 'and never shrinks')
+
+    def test_4_late_image_motion_is_waited_for(self):
+        """A replay faster than real time delays the registration's motions: each image's motion arrives 1 s (sim)
+        after navigation stamped later. The node waits for it (the image was announced on camera_info), so the
+        odometry published at an image is the state at that image, not 1 s (0.5 m) later."""
+        truth = self.truth
+        published = {}
+        rospy.Subscriber('/wait/odometry', Odometry, lambda m: published.__setitem__(m.header.stamp.to_sec(), m))
+        diag = Diagnostics('waiting_fusion')
+        pub_imu = rospy.Publisher('/wait/nav/imu', Imu, queue_size=1000)
+        pub_alt = rospy.Publisher('/wait/nav/altitude', Range, queue_size=1000)
+        pub_odom = rospy.Publisher('/wait/nav/odometry', Odometry, queue_size=1000)
+        pub_info = rospy.Publisher('/wait/camera_info', CameraInfo, queue_size=1000)
+        pub_motion = rospy.Publisher('/wait/motion', ImageMotion, queue_size=1000)
+        deadline = time.time() + 20.0
+        while time.time() < deadline and any(p.get_num_connections() == 0
+                                             for p in (pub_imu, pub_alt, pub_odom, pub_info, pub_motion)):
+            time.sleep(0.1)
+        time.sleep(0.5)
+        dt, delay_s, duration_s = 0.02, 1.0, 12.0
+        late_motions = []
+        for k in range(int(duration_s / dt) + 1):
+            t = k * dt
+            stamp = rospy.Time.from_sec(T0 + t)
+            imu = Imu()
+            imu.header.stamp = stamp
+            imu.header.frame_id = 'base_link'
+            (imu.orientation.x, imu.orientation.y, imu.orientation.z,
+             imu.orientation.w) = yaw_quaternion(truth.enu_yaw)
+            imu.orientation_covariance[0] = 1e-6
+            pub_imu.publish(imu)
+            if k % 5 == 0:
+                alt = Range()
+                alt.header.stamp = stamp
+                alt.header.frame_id = 'altimeter'
+                alt.min_range, alt.max_range = 0.1, 50.0
+                alt.range = HEIGHT_M - LEVER_ARM[2]
+                pub_alt.publish(alt)
+                e, n = truth.base(t)
+                odom = Odometry()
+                odom.header.stamp = stamp
+                odom.header.frame_id = 'utm'
+                odom.child_frame_id = 'base_link'
+                odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = e, n, -45.0
+                (odom.pose.pose.orientation.x, odom.pose.pose.orientation.y, odom.pose.pose.orientation.z,
+                 odom.pose.pose.orientation.w) = yaw_quaternion(truth.enu_yaw)
+                odom.pose.covariance[0] = odom.pose.covariance[7] = 0.05 ** 2
+                pub_odom.publish(odom)
+            if k % 10 == 0:  # an image at 5 Hz: its camera_info now, its motion 1 s later
+                info = CameraInfo()
+                info.header.stamp = stamp
+                info.header.frame_id = 'camera_optical'
+                info.width, info.height = 720, 576
+                info.K = [FX, 0, CX, 0, FX, CY, 0, 0, 1]
+                pub_info.publish(info)
+                if k > 0:
+                    late_motions.append((t + delay_s, motion_message(T0 + t - 0.2, T0 + t, SPEED_MPS * 0.2)))
+            while late_motions and late_motions[0][0] <= t + 1e-9:
+                pub_motion.publish(late_motions.pop(0)[1])
+            time.sleep(dt / 10.0)
+        for _, msg in late_motions:
+            pub_motion.publish(msg)
+        deadline = time.time() + 10.0
+        while time.time() < deadline and len(published) < 55:
+            time.sleep(0.1)
+        image_stamps = sorted(s for s in published if abs(round((s - T0) / 0.2) * 0.2 - (s - T0)) < 1e-4)
+        self.assertGreaterEqual(len(image_stamps), 50, 'an odometry at each image')
+        errors = []
+        for s in image_stamps:
+            if s - T0 < 2.0:
+                continue
+            e, n = truth.camera(s - T0)
+            p = published[s].pose.pose.position
+            errors.append(math.hypot(p.x - e, p.y - n))
+        print('late motions: %d image odometries, error max %.3f m (a state 1 s late would be %.2f m off)'
+              % (len(image_stamps), max(errors), SPEED_MPS * delay_s))
+        self.assertLess(max(errors), 0.15, 'the odometry at an image is the state at that image')
+        deadline = time.time() + 5.0
+        while time.time() < deadline and diag.get('images awaiting their motion') != '0':
+            time.sleep(0.2)
+        self.assertEqual(diag.get('images awaiting their motion'), '0')
+        self.assertEqual(diag.count('motion waits timed out'), 0)
 
 
 if __name__ == '__main__':
