@@ -69,21 +69,7 @@ int PointTracker::track(const cv::Mat& next_image) {
   // Backward from the forward result, started there (not at the expected answer, which would bias the check).
   cv::calcOpticalFlowPyrLK(next, previous_pyramid_, forward, backward, status_b, err, window, config_.pyramid_levels,
                            criteria);
-  const float max_fb2 = static_cast<float>(config_.max_fb_error_px * config_.max_fb_error_px);
-  const float b = static_cast<float>(config_.border_px);
-  std::vector<cv::Point2f> kept;
-  std::vector<int> kept_ids;
-  for (size_t i = 0; i < points_.size(); ++i) {
-    if (!status_f[i] || !status_b[i]) continue;
-    const cv::Point2f d = backward[i] - points_[i];
-    if (d.dot(d) > max_fb2) continue;
-    const cv::Point2f& p = forward[i];
-    if (p.x < b || p.y < b || p.x > image_size_.width - 1 - b || p.y > image_size_.height - 1 - b) continue;
-    kept.push_back(p);
-    kept_ids.push_back(ids_[i]);
-  }
-  points_ = std::move(kept);
-  ids_ = std::move(kept_ids);
+  keepConsistent(points_, forward, backward, status_f, status_b, nullptr);
   previous_pyramid_ = std::move(next);
   return static_cast<int>(points_.size());
 }
@@ -119,13 +105,20 @@ int PointTracker::anchorOnReference(const cv::Mat& reference_image, const std::v
   cv::calcOpticalFlowPyrLK(warped, previous_pyramid_, templ, forward, status_f, err, window, levels, criteria,
                            cv::OPTFLOW_USE_INITIAL_FLOW);
   cv::calcOpticalFlowPyrLK(previous_pyramid_, warped, forward, backward, status_b, err, window, levels, criteria);
+  keepConsistent(templ, forward, backward, status_f, status_b, &inlier);
+  return static_cast<int>(points_.size());
+}
+
+void PointTracker::keepConsistent(const std::vector<cv::Point2f>& origin, const std::vector<cv::Point2f>& forward,
+                                  const std::vector<cv::Point2f>& backward, const std::vector<uchar>& status_f,
+                                  const std::vector<uchar>& status_b, const std::vector<uchar>* inlier) {
   const float max_fb2 = static_cast<float>(config_.max_fb_error_px * config_.max_fb_error_px);
   const float b = static_cast<float>(config_.border_px);
   std::vector<cv::Point2f> kept;
   std::vector<int> kept_ids;
   for (size_t i = 0; i < points_.size(); ++i) {
-    if (!inlier[i] || !status_f[i] || !status_b[i]) continue;
-    const cv::Point2f d = backward[i] - templ[i];
+    if ((inlier && !(*inlier)[i]) || !status_f[i] || !status_b[i]) continue;
+    const cv::Point2f d = backward[i] - origin[i];
     if (d.dot(d) > max_fb2) continue;
     const cv::Point2f& p = forward[i];
     if (p.x < b || p.y < b || p.x > image_size_.width - 1 - b || p.y > image_size_.height - 1 - b) continue;
@@ -134,7 +127,6 @@ int PointTracker::anchorOnReference(const cv::Mat& reference_image, const std::v
   }
   points_ = std::move(kept);
   ids_ = std::move(kept_ids);
-  return static_cast<int>(points_.size());
 }
 
 }  // namespace vision

@@ -64,6 +64,11 @@ class PointTracker {
 
  private:
   std::vector<cv::Mat> pyramid(const cv::Mat& image) const;
+  /// Keeps the points tracked forward to `forward` whose backward track lands within max_fb_error_px of `origin`,
+  /// away from the border (and inliers when `inlier` is given); their ids follow them.
+  void keepConsistent(const std::vector<cv::Point2f>& origin, const std::vector<cv::Point2f>& forward,
+                      const std::vector<cv::Point2f>& backward, const std::vector<uchar>& status_f,
+                      const std::vector<uchar>& status_b, const std::vector<uchar>* inlier);
 
   TrackerConfig config_;
   std::vector<cv::Mat> previous_pyramid_;
