@@ -18,7 +18,14 @@ for config in "${configs[@]}"; do
   [[ -f $config ]] || { echo "make-bags: no dive description $config" >&2; exit 1; }
   name=$(basename "$config" .yaml)
   bag=bags/$name.bag
-  if [[ -f $bag && $bag -nt $config && $bag -nt $synth && $bag -nt devel/lib/libexocet_mosaic_sim.so ]]; then
+  # What makes the bag: the description, the simulator library and the bag writer's sources (dive_synth itself is
+  # relinked whenever any node's code changes, which does not change the bag).
+  fresh=1
+  for input in $config devel/lib/libexocet_mosaic_sim.so src/exocet_mosaic/src/tools/dive_synth.cpp \
+      src/exocet_mosaic/src/ros/dive_bag_writer.cpp src/exocet_mosaic/include/exocet_mosaic/ros/dive_bag_writer.h; do
+    [[ $bag -nt $input ]] || fresh=0
+  done
+  if [[ -f $bag && $fresh == 1 ]]; then
     echo "make-bags: $bag is up to date"
     continue
   fi
