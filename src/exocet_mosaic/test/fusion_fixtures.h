@@ -49,6 +49,8 @@ struct SyntheticDiveConfig {
   bool with_dr = true;
   double dr_rate_hz = 10.0;
   bool dr_shares_heading = true;
+  double dr_scale_sigma = 0.0;  ///< 1-sigma of the DR's velocity scale error (drawn only when > 0)
+  double dr_scale_error = 0.0;  ///< added to the draw: a known scale error
   // Fixes
   bool with_fixes = true;
   double fix_rate_hz = 1.0;
@@ -109,6 +111,7 @@ inline SyntheticDive makeSyntheticDive(const SyntheticDiveConfig& config) {
   double psi = config.heading_sigma_rad * n01(rng);
   double psi_dot = config.heading_drift_sigma_rps * n01(rng);
   double c = config.pixel_size_sigma * n01(rng);
+  double dr_scale = config.dr_scale_error + (config.dr_scale_sigma > 0.0 ? config.dr_scale_sigma * n01(rng) : 0.0);
   Eigen::Vector2d d = Eigen::Vector2d(3.0, -2.0);  // DR offset: arbitrary, the filter initialises it from the DR
   std::vector<Eigen::Vector2d> dr_offset_at_images;
   for (int k = 0; k < frames; ++k) {
@@ -126,6 +129,8 @@ inline SyntheticDive makeSyntheticDive(const SyntheticDiveConfig& config) {
       const Eigen::Vector2d measured = rot2(psi) * delta / (1.0 + c) + gauss2(std::sqrt(image_cov(0, 0)));
       // Dead-reckoning offset: the shared heading error, plus its random walk.
       if (config.dr_shares_heading) d += (rot2(psi) - Eigen::Matrix2d::Identity()) * delta;
+      d += dr_scale * delta;  // the DR's velocity scale error
+      if (config.dr_scale_sigma > 0.0) dr_scale += m.dr_scale_noise_per_sqrt_s * std::sqrt(dt) * n01(rng);
       d += gauss2(std::sqrt(m.dr_offset_noise_m2_per_m * delta.norm() + m.dr_offset_noise_m2_per_s * dt));
       NavEvent e;
       e.kind = inIntervals(t - config.t0_s, config.image_failures_s) ? NavEvent::kImageFailure : NavEvent::kImage;
@@ -240,6 +245,8 @@ inline FilterConfig linearConfig() {
   c.initial_heading_drift_sigma_rps = 0.0;
   c.heading_noise_rad_per_sqrt_s = 0.0;
   c.heading_drift_noise_rps_per_sqrt_s = 0.0;
+  c.initial_dr_scale_sigma = 0.0;
+  c.dr_scale_noise_per_sqrt_s = 0.0;
   c.gate_probability = 1.0 - 1e-15;  // nothing gated
   return c;
 }

@@ -67,6 +67,8 @@ FilterState FilterState::from(double stamp_s, const StateVector& x, const StateM
   s.heading_drift_rps = x[kHeadingDrift];
   s.dr_offset_en_m = x.segment<2>(kDrEast);
   s.dr_offset_covariance_m2 = P.block<2, 2>(kDrEast, kDrEast);
+  s.dr_scale_error = x[kDrScale];
+  s.dr_scale_error_sigma = std::sqrt(std::max(0.0, P(kDrScale, kDrScale)));
   s.x = x;
   s.P = P;
   return s;
@@ -92,6 +94,9 @@ std::string FilterConfig::validate() const {
   checkPositive(err, "dr_measurement_sigma_m", dr_measurement_sigma_m, "m");
   checkNonNegative(err, "dr_offset_noise_m2_per_m", dr_offset_noise_m2_per_m, "m^2/m");
   checkNonNegative(err, "dr_offset_noise_m2_per_s", dr_offset_noise_m2_per_s, "m^2/s");
+  if (!(initial_dr_scale_sigma >= 0.0 && initial_dr_scale_sigma < 0.5))
+    err << "initial_dr_scale_sigma = " << initial_dr_scale_sigma << " out of range [0, 0.5); ";
+  checkNonNegative(err, "dr_scale_noise_per_sqrt_s", dr_scale_noise_per_sqrt_s, "1/sqrt(s)");
   if (!(gate_probability > 0.0 && gate_probability < 1.0))
     err << "gate_probability = " << gate_probability << " out of range (0, 1); ";
   if (recovery_rejections < 1) err << "recovery_rejections = " << recovery_rejections << " out of range [1, inf); ";
@@ -159,6 +164,7 @@ void NavigationFilter::initialize(double stamp_s, const Eigen::Vector2d& camera_
   P(kPixelSize, kPixelSize) = std::pow(config_.initial_pixel_size_correction_sigma, 2);
   P(kHeading, kHeading) = std::pow(config_.initial_heading_sigma_rad, 2);
   P(kHeadingDrift, kHeadingDrift) = std::pow(config_.initial_heading_drift_sigma_rps, 2);
+  P(kDrScale, kDrScale) = std::pow(config_.initial_dr_scale_sigma, 2);
   FilterStep first;
   first.stamp_s = stamp_s;
   first.x_prior = first.x_posterior = x;
@@ -526,15 +532,20 @@ void NavigationFilter::predictSegment(Working* w, double dt_s, double image_frac
                                                                              std::pow(config_.image_step_noise_m, 2) *
                                                                              Eigen::Matrix2d::Identity();
     x.segment<2>(kEast) += dp;
-    if (couple_dr) {
-      const Eigen::Matrix2d I_minus_A = Eigen::Matrix2d::Identity() - A;
-      F.block<2, 1>(kDrEast, kPixelSize) = I_minus_A * *motion_m;
-      F.block<2, 1>(kDrEast, kHeading) = scale * kJ * corrected;
-      const Eigen::Matrix2d G_d = scale * I_minus_A;
+    if (w->dr_initialized) {
+      // The DR offset d' = d + G_d m, first order in the small errors c, psi and s:
+      //   the DR's scale error adds s dp; a shared heading error adds (1 + c) (I - R(-psi)) m.
+      const double s = x[kDrScale];
+      const Eigen::Matrix2d I_minus_A =
+          couple_dr ? (Eigen::Matrix2d::Identity() - A).eval() : Eigen::Matrix2d::Zero().eval();
+      const Eigen::Matrix2d G_d = scale * I_minus_A + s * G_p;
+      F.block<2, 1>(kDrEast, kDrScale) = dp;
+      F.block<2, 1>(kDrEast, kPixelSize) = I_minus_A * *motion_m + s * corrected;
+      F.block<2, 1>(kDrEast, kHeading) = ((couple_dr ? 1.0 : 0.0) - s) * scale * kJ * corrected;
       Q.block<2, 2>(kDrEast, kDrEast) += G_d * *motion_cov * G_d.transpose();
       Q.block<2, 2>(kEast, kDrEast) += G_p * *motion_cov * G_d.transpose();
       Q.block<2, 2>(kDrEast, kEast) += G_d * *motion_cov * G_p.transpose();
-      x.segment<2>(kDrEast) += scale * I_minus_A * *motion_m;
+      x.segment<2>(kDrEast) += G_d * *motion_m;
     }
     distance_m = dp.norm();
   } else {
@@ -542,6 +553,7 @@ void NavigationFilter::predictSegment(Working* w, double dt_s, double image_frac
   }
   Q.block<2, 2>(kEast, kEast) += config_.position_noise_m2_per_s * dt_s * Eigen::Matrix2d::Identity();
   Q(kPixelSize, kPixelSize) += std::pow(config_.pixel_size_correction_noise_per_sqrt_s, 2) * dt_s;
+  Q(kDrScale, kDrScale) += std::pow(config_.dr_scale_noise_per_sqrt_s, 2) * dt_s;
   const double q_angle = std::pow(config_.heading_noise_rad_per_sqrt_s, 2);
   const double q_drift = std::pow(config_.heading_drift_noise_rps_per_sqrt_s, 2);
   Q(kHeading, kHeading) += q_angle * dt_s + q_drift * dt_s * dt_s * dt_s / 3.0;

@@ -37,6 +37,10 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
                "dead-reckoning offset random walk per metre travelled (m^2/m)");
   p.readDouble("dr_offset_noise_m2_per_s", &f->dr_offset_noise_m2_per_s, 0.0, 100.0,
                "dead-reckoning offset random walk per second (m^2/s)");
+  p.readDouble("initial_dr_scale_sigma", &f->initial_dr_scale_sigma, 0.0, 0.49,
+               "1-sigma of the dead reckoning's velocity scale error at the start (relative)");
+  p.readDouble("dr_scale_noise_per_sqrt_s", &f->dr_scale_noise_per_sqrt_s, 0.0, 1.0,
+               "random walk of the dead reckoning's velocity scale error (1/sqrt(s))");
   p.readBool("dr_shares_heading", &f->dr_shares_heading,
              "the dead reckoning's heading comes from the gyro that gives the images' attitude");
   double gate = f->gate_probability;

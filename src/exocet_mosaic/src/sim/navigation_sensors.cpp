@@ -34,6 +34,7 @@ std::string NavigationSensorConfig::validate() const {
   checkRange(err, "dvl_scale_error", dvl_scale_error, 0.0, 0.2, "");
   checkRange(err, "nav_rate_hz", nav_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
   checkRange(err, "dr_sigma_per_m", dr_sigma_per_m, 0.0, 1.0, "m/m");
+  checkRange(err, "dr_launch_sigma_m", dr_launch_sigma_m, 0.0, 100.0, "m");
   checkRange(err, "depth_rate_hz", depth_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
   checkRange(err, "depth_noise_m", depth_noise_m, 0.0, 10.0, "m");
   checkRange(err, "altimeter_rate_hz", altimeter_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
@@ -72,6 +73,7 @@ NavigationSensorSimulator::NavigationSensorSimulator(const NavigationSensorConfi
   gyro_bias_ = Eigen::Vector3d(init.gaussian(config_.gyro_bias_rps), init.gaussian(config_.gyro_bias_rps),
                                init.gaussian(config_.gyro_bias_rps));
   dvl_scale_ = 1.0 + init.gaussian(config_.dvl_scale_error);
+  launch_error_m_ = Eigen::Vector2d(init.gaussian(config_.dr_launch_sigma_m), init.gaussian(config_.dr_launch_sigma_m));
 }
 
 Eigen::Vector3d NavigationSensorSimulator::toWorld(const Eigen::Vector3d& local) const {
@@ -122,7 +124,9 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
   const double stamp = t0_unix_s_ + tau;
   const Eigen::Matrix3d R = s.rotation();
   if (!initialised_) {
-    dr_position_local_ = s.position_m;  // dead reckoning starts from the known launch point
+    // Dead reckoning starts from the launch point, known to dr_launch_sigma_m (its reported covariance says so).
+    dr_position_local_ = s.position_m;
+    dr_position_local_.head<2>() += launch_error_m_;
     dvl_measured_ = R.transpose() * s.velocity_mps;
     initialised_ = true;
   } else {
@@ -197,7 +201,7 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
     p.orientation = Eigen::Quaterniond(R_measured);
     p.linear_velocity_mps = dvl_measured_;
     p.angular_velocity_rps = measured_rate;
-    const double sigma_xy = std::hypot(0.01, config_.dr_sigma_per_m * dr_distance_m_);
+    const double sigma_xy = std::hypot(config_.dr_launch_sigma_m, config_.dr_sigma_per_m * dr_distance_m_);
     p.pose_covariance.diagonal() << sigma_xy * sigma_xy, sigma_xy * sigma_xy,
         config_.depth_noise_m * config_.depth_noise_m, std::pow(config_.attitude_noise_rad, 2),
         std::pow(config_.attitude_noise_rad, 2), std::pow(config_.gyro_bias_rps * std::max(1.0, tau), 2);

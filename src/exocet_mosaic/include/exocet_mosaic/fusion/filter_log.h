@@ -22,6 +22,8 @@ namespace fusion {
  *    reckoning, see FilterConfig::dr_shares_heading): measured yaw = true yaw + psi (ENU, counter-clockwise).
  *  - kHeadingDrift: d psi / dt (rad/s): the gyro's bias, which makes the heading error grow linearly.
  *  - kDrEast, kDrNorth: dead-reckoning offset (m): DR camera position = true camera position + offset + white noise.
+ *  - kDrScale: scale-factor error s of the dead reckoning's velocity (DVL): the DR's displacement is (1 + s) times
+ *    the true one, so the offset grows by s times each displacement (dimensionless).
  */
 enum StateIndex : int {
   kEast = 0,
@@ -31,7 +33,8 @@ enum StateIndex : int {
   kHeadingDrift = 4,
   kDrEast = 5,
   kDrNorth = 6,
-  kStateSize = 7
+  kDrScale = 7,
+  kStateSize = 8
 };
 
 using StateVector = Eigen::Matrix<double, kStateSize, 1>;
@@ -49,6 +52,8 @@ struct FilterState {
   double heading_drift_rps = 0.0;
   Eigen::Vector2d dr_offset_en_m = Eigen::Vector2d::Zero();  ///< dead-reckoning offset (zero until the first DR)
   Eigen::Matrix2d dr_offset_covariance_m2 = Eigen::Matrix2d::Zero();
+  double dr_scale_error = 0.0;  ///< dead reckoning's velocity scale-factor error (relative)
+  double dr_scale_error_sigma = 0.0;
   Eigen::VectorXd x;  ///< the whole state, layout StateIndex (empty before initialisation)
   Eigen::MatrixXd P;  ///< its covariance
 

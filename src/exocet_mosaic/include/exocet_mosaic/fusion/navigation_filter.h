@@ -5,8 +5,8 @@
  * fixes, gating with recovery. No ROS in it.
  *
  * ## State (filter_log.h, StateIndex)
- * x = [E, N, c, psi, psi_dot, dE, dN]: camera centre (UTM), pixel-size correction, heading error of the attitude
- * and its drift rate (gyro bias), dead-reckoning (DR) offset.
+ * x = [E, N, c, psi, psi_dot, dE, dN, s]: camera centre (UTM), pixel-size correction, heading error of the attitude
+ * and its drift rate (gyro bias), dead-reckoning (DR) offset, and the DR's velocity scale-factor error.
  *
  * ## Models (an extended Kalman filter)
  * - Image motion m (metres, from toMetricMotion, covariance R_m) between the previous image's stamp a and the
@@ -22,6 +22,10 @@
  *   FilterConfig::dr_shares_heading), the DR's heading error moves the offset deterministically:
  *     d' = d + (1 + c) (I - R(-psi)) f m,
  *   so that the DR and the images, which see the same heading error, are not counted as independent evidence.
+ * - DR scale factor: the DR integrates a velocity (DVL) with a scale error s, so its offset also grows by s times
+ *   each displacement, d' += s (1 + c) R(-psi) f m; s is a slow random walk. Without it the scale error (0.3 % is
+ *   15 cm over 50 m, back to zero on the return) has to be modelled as a random walk that is far too loose on
+ *   short distances and too tight on long ones; with it the DR is the precise relative sensor it is.
  * - No image motion over an interval (registration failure, a gap in the images, dead reckoning or fixes ahead of
  *   the image stream): p is kept with a large random walk (no_motion_position_noise_m2_per_s): the next DR update,
  *   z_DR = p + d + v, then carries the position by the DR's increments (d is known from before), with the
@@ -93,6 +97,8 @@ struct FilterConfig {
   double dr_measurement_sigma_m = 0.01;    ///< white noise of one DR position, each axis (m, > 0)
   double dr_offset_noise_m2_per_m = 1e-3;  ///< DR offset random walk per metre travelled (m^2/m, >= 0)
   double dr_offset_noise_m2_per_s = 1e-6;  ///< DR offset random walk per second (m^2/s, >= 0)
+  double initial_dr_scale_sigma = 0.01;    ///< 1-sigma of the DR's velocity scale error at the start ([0, 0.5))
+  double dr_scale_noise_per_sqrt_s = 1e-5;  ///< random walk of the DR's scale error (1/sqrt(s), >= 0)
   /// The DR's heading comes from the same gyro as the attitude used for the images (the usual ROV set-up, and the
   /// simulator's): its heading error moves the DR offset through psi (see the file comment).
   bool dr_shares_heading = true;

@@ -31,6 +31,7 @@ struct NavigationSensorConfig {
   double dvl_scale_error = 0.003;      ///< 1-sigma of the velocity scale factor error (dimensionless)
   double nav_rate_hz = 10.0;           ///< dead-reckoning output rate
   double dr_sigma_per_m = 0.01;        ///< reported position sigma growth per metre travelled (for the covariance)
+  double dr_launch_sigma_m = 0.01;     ///< 1-sigma of the launch point's horizontal error, each axis (DR start)
   double depth_rate_hz = 10.0;
   double depth_noise_m = 0.02;
   double altimeter_rate_hz = 10.0;
@@ -92,6 +93,7 @@ class NavigationSensorSimulator {
   RandomStream rng_imu_, rng_dvl_, rng_depth_, rng_alt_, rng_usbl_;
   Eigen::Vector3d gyro_bias_ = Eigen::Vector3d::Zero();
   double dvl_scale_ = 1.0;
+  Eigen::Vector2d launch_error_m_ = Eigen::Vector2d::Zero();  ///< where the DR starts, relative to the truth
   double heading_error_rad_ = 0.0;
   Eigen::Vector3d dr_position_local_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d dvl_measured_ = Eigen::Vector3d::Zero();
