@@ -629,6 +629,7 @@ int main(int argc, char** argv) {
   std::string dive_yaml = config_dir + "/dives/bench_fusion.yaml";
   bool cross_pass = true;
   int monte_carlo_runs = 50;
+  std::vector<std::string> monte_carlo_overrides;  // "navigation.key=value": the Monte Carlo's sensors differ
   std::vector<std::pair<std::string, double>> filter_overrides;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -637,6 +638,7 @@ int main(int argc, char** argv) {
     else if (a == "--dive" && i + 1 < argc) dive_yaml = argv[++i];
     else if (a == "--no-cross-pass") cross_pass = false;
     else if (a == "--monte-carlo" && i + 1 < argc) monte_carlo_runs = std::max(0, std::atoi(argv[++i]));
+    else if (a == "--monte-carlo-set" && i + 1 < argc) monte_carlo_overrides.push_back(argv[++i]);
     else if (a == "--filter" && i + 1 < argc) {
       const std::string kv = argv[++i];
       const size_t eq = kv.find('=');
@@ -647,7 +649,8 @@ int main(int argc, char** argv) {
       filter_overrides.emplace_back(kv.substr(0, eq), std::stod(kv.substr(eq + 1)));
     } else {
       std::cerr << "usage: bench_fusion [--output-dir DIR] [--shared-data DIR] [--dive YAML] [--no-cross-pass]"
-                   " [--monte-carlo RUNS] [--filter NAME=VALUE]...\n";
+                   " [--monte-carlo RUNS] [--monte-carlo-set navigation.KEY=VALUE]..."
+                   " [--filter NAME=VALUE]...\n";
       return 2;
     }
   }
@@ -732,14 +735,19 @@ int main(int argc, char** argv) {
   const double rmse_usbl_inliers = std::sqrt(usbl_inlier_sq / std::max(1, usbl_inliers));
 
   // ---- 6. The filter: DR + USBL only, then all sources; RTS over the whole dive ----
-  fusion::FilterConfig config = filterConfigForSensors(dive.synthesis.navigation);
-  for (const auto& [name, value] : filter_overrides) {
-    if (!setFilterField(&config, name, value)) {
-      std::cerr << "bench_fusion: --filter " << name << ": no such numeric FilterConfig field\n";
-      return 2;
-    }
-    std::cout << "filter: " << name << " = " << value << "\n";
-  }
+  // The filter from the sensors' specifications, then the command line's changes.
+  const auto configure = [&](const sim::NavigationSensorConfig& sensors, fusion::FilterConfig* c) {
+    *c = filterConfigForSensors(sensors);
+    for (const auto& [name, value] : filter_overrides)
+      if (!setFilterField(c, name, value)) {
+        std::cerr << "bench_fusion: --filter " << name << ": no such numeric FilterConfig field\n";
+        return false;
+      }
+    return true;
+  };
+  fusion::FilterConfig config;
+  if (!configure(dive.synthesis.navigation, &config)) return 2;
+  for (const auto& [name, value] : filter_overrides) std::cout << "filter: " << name << " = " << value << "\n";
   // Initial state: the first DR position (the vehicle's navigation starts at the launch point) with its covariance.
   const Eigen::Vector2d p0 = dr_at.count(t0) ? dr_at.at(t0) : truth[0];
   Eigen::Matrix2d P0 = d.dead_reckoning.front().pose_covariance.block<2, 2>(0, 0);
@@ -858,7 +866,15 @@ int main(int argc, char** argv) {
   std::vector<int> mc_nees_count(n, 0);
   const auto mc_start = Clock::now();
   if (monte_carlo_runs > 0) {
-    const sim::DiveSynthesisConfig& sc = dive.synthesis;
+    // The Monte Carlo's sensors: the dive's, or changed from the command line (to find which sensor's model a
+    // consistency problem comes from); the filter follows them.
+    const sim::DiveDescription mc_dive = monte_carlo_overrides.empty()
+                                             ? dive
+                                             : sim::loadDiveDescription(dive_yaml, monte_carlo_overrides);
+    const sim::DiveSynthesisConfig& sc = mc_dive.synthesis;
+    fusion::FilterConfig mc_config;
+    if (!configure(sc.navigation, &mc_config)) return 2;
+    for (const std::string& o : monte_carlo_overrides) std::cout << "Monte Carlo sensors: " << o << "\n";
     const sim::VehicleTrajectory trajectory(sc.trajectory);
     const double duration_s = sc.duration_s > 0.0 ? std::min(sc.duration_s, trajectory.duration_s())
                                                   : trajectory.duration_s();
@@ -888,7 +904,7 @@ int main(int argc, char** argv) {
       const double r_rmse_usbl = std::sqrt(usbl_sq / std::max<size_t>(1, rs.usbl_errors.size()));
       Eigen::Matrix2d r_P0 = r.dead_reckoning.front().pose_covariance.block<2, 2>(0, 0);
       const Eigen::Vector2d r_p0 = rs.dr_at.count(t0) ? rs.dr_at.at(t0) : truth[0];
-      const FilterRun fr = runFilter(config, rs.events, true, true, t0, r_p0, r_P0, d.frame_stamps_s);
+      const FilterRun fr = runFilter(mc_config, rs.events, true, true, t0, r_p0, r_P0, d.frame_stamps_s);
       const double r_filtered = rmse(fr.filtered, truth), r_nav_rmse = rmse(r_nav, truth);
       mc_rmse_filtered.push_back(r_filtered);
       mc_rmse_nav.push_back(r_nav_rmse);
