@@ -28,6 +28,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "exocet_servo/control/image_servo_controller.h"
 #include "exocet_servo/control/invariant_servo.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
@@ -47,36 +48,8 @@ struct ImageServoSetup {
   Eigen::Matrix3d k_estimate_controlled = Eigen::Matrix3d::Identity();
 };
 
-/// Loop parameters; validate() lists the allowed ranges.
-struct ImageServoConfig {
-  /// The law. Its max_iterations is the loop's iteration budget; its image size is replaced by the controlled
-  /// camera's; convergence_threshold on |e| as in invariant_servo.h. Defaults: |e| < 3e-4 (just above the floor that
-  /// the re-anchored points' jitter leaves, ~1e-4), at most 80 iterations, gain 0.3 far from the goal (keeps the first
-  /// image motions trackable) rising to 0.7 near it.
-  control::ServoConfig servo = [] {
-    control::ServoConfig c;
-    c.convergence_threshold = 3e-4;
-    c.max_iterations = 80;
-    c.gain = control::AdaptiveGain{0.7, 0.3, 4.0};
-    return c;
-  }();
-  vision::MatcherConfig matcher;
-  vision::TrackerConfig tracker;
-  double dt_s = 1.0;                      ///< integration period of the velocity, (0, 100]
-  double depth_noise_fraction = 0.0;      ///< relative depth error, fixed per point (a triangulation bias), [0, 0.5]
-  unsigned seed = 1;                      ///< of the depth errors
-  int max_points = 300;                   ///< points given to the law (evenly thinned), [4, 100000]
-  int depth_check_radius_px = 3;          ///< half-side of the window checked for a depth discontinuity, [0, 50]
-  double depth_max_relative_step = 0.03;  ///< max / min depth in that window, [0, 10]
-  int max_rematches = 10;                 ///< SIFT re-matchings allowed during one servoing, [0, 100000]
-  /// Once the law's |e| falls below this, the points are re-anchored on the reference image at every iteration
-  /// (PointTracker::anchorOnReference); 0 disables it. [0, 1]
-  double anchor_below_error = 0.01;
-  double anchor_max_residual_px = 3.0;  ///< of the affine fit, (0, 50]
-  /// "" or every bad field with its allowed range ("; "-joined).
-  std::string validate() const;
-};
-
+/// Loop parameters: those of the controller (control/image_servo_controller.h); dt_s is the integration period.
+using ImageServoConfig = control::ImageServoConfig;
 /// Outcome of a servoing.
 enum class ImageServoStatus {
   kConverged,        ///< the law's |e| fell below its threshold
