@@ -7,6 +7,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Geometry>
+
 namespace exocet_servo {
 namespace control {
 
@@ -24,6 +26,46 @@ double threadCpuSeconds() {
 }
 
 Eigen::Vector2d eigen(const cv::Point2f& p) { return Eigen::Vector2d(p.x, p.y); }
+
+/// Pairs consistent with one rigid motion between the two sets of 3D points (RANSAC over 3-point samples, the
+/// consensus refitted by Umeyama's least squares): a pair is kept when its residual is within fraction x its depth.
+std::vector<bool> rigidInliers(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                               double fraction, std::mt19937* rng) {
+  const size_t n = a.size();
+  std::vector<bool> best(n, true);
+  if (n < 4 || fraction <= 0.0) return best;
+  const auto inliers_of = [&](const Eigen::Matrix4d& t, std::vector<bool>* in) {
+    int count = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d p = t.topLeftCorner<3, 3>() * a[i] + t.topRightCorner<3, 1>();
+      (*in)[i] = (p - b[i]).norm() <= fraction * b[i].z();
+      count += (*in)[i];
+    }
+    return count;
+  };
+  const auto fit = [&](const std::vector<size_t>& idx) {
+    Eigen::Matrix3Xd pa(3, idx.size()), pb(3, idx.size());
+    for (size_t k = 0; k < idx.size(); ++k) {
+      pa.col(k) = a[idx[k]];
+      pb.col(k) = b[idx[k]];
+    }
+    return Eigen::Matrix4d(Eigen::umeyama(pa, pb, false));
+  };
+  std::uniform_int_distribution<size_t> pick(0, n - 1);
+  int best_count = -1;
+  std::vector<bool> in(n);
+  for (int trial = 0; trial < 300; ++trial) {
+    const size_t i = pick(*rng), j = pick(*rng), k = pick(*rng);
+    if (i == j || j == k || i == k) continue;
+    const int count = inliers_of(fit({i, j, k}), &in);
+    if (count > best_count) best_count = count, best = in;
+  }
+  std::vector<size_t> consensus;
+  for (size_t i = 0; i < n; ++i)
+    if (best[i]) consensus.push_back(i);
+  if (consensus.size() >= 3) inliers_of(fit(consensus), &best);
+  return best;
+}
 
 ServoConfig lawConfig(const ImageServoConfig& config, int width_px, int height_px) {
   const std::string errors = config.validate();
@@ -61,6 +103,8 @@ std::string ImageServoConfig::validate() const {
   check(max_rematches >= 0 && max_rematches <= 100000, "max_rematches", "[0, 100000]");
   check(anchor_below_error >= 0.0 && anchor_below_error <= 1.0, "anchor_below_error", "[0, 1]");
   check(anchor_max_residual_px > 0.0 && anchor_max_residual_px <= 50.0, "anchor_max_residual_px", "(0, 50]");
+  check(rematch_below_error >= 0.0 && rematch_below_error <= 1.0, "rematch_below_error", "[0, 1]");
+  check(rigid_outlier_fraction >= 0.0 && rigid_outlier_fraction <= 1.0, "rigid_outlier_fraction", "[0, 1]");
   return errors.str();
 }
 
@@ -94,7 +138,7 @@ ImageServoController::ImageServoController(const ImageServoConfig& config, const
 std::string ImageServoController::setReference(const cv::Mat& reference_image, const DepthLookup& reference_depth) {
   have_reference_ = false;
   iterations_ = rematches_ = initial_matches_ = 0;
-  anchoring_ = force_rematch_ = false;
+  anchoring_ = force_rematch_ = rematched_near_goal_ = false;
   law_ids_.clear();
   ref_px_.clear();
   ref_px_cv_.clear();
@@ -122,13 +166,31 @@ std::string ImageServoController::rematch(const cv::Mat& image, const DepthLooku
   cur_depth_factor_.clear();
   std::vector<cv::Point2f> cur;
   std::vector<int> ids;
-  const size_t n = m.reference_px.size();
+  // Pairs with a usable depth on both sides, checked against one rigid motion in 3D.
+  std::vector<size_t> usable;
+  std::vector<double> ref_z, cur_z;
+  std::vector<Eigen::Vector3d> ref_3d, cur_3d;
+  const Eigen::Matrix3d k_ref_inv = k_reference_.inverse(), k_cur_inv = k_current_.inverse();
+  for (size_t i = 0; i < m.reference_px.size(); ++i) {
+    const Eigen::Vector2d r = eigen(m.reference_px[i]), c = eigen(m.current_px[i]);
+    const double zr = reference_depth_(r), zc = current_depth(c);
+    if (!std::isfinite(zr) || !std::isfinite(zc)) continue;
+    usable.push_back(i);
+    ref_z.push_back(zr);
+    cur_z.push_back(zc);
+    ref_3d.push_back(zr * (k_ref_inv * r.homogeneous()));
+    cur_3d.push_back(zc * (k_cur_inv * c.homogeneous()));
+  }
+  const std::vector<bool> rigid = rigidInliers(ref_3d, cur_3d, config_.rigid_outlier_fraction, &ransac_rng_);
+  std::vector<size_t> kept;
+  for (size_t u = 0; u < usable.size(); ++u)
+    if (rigid[u]) kept.push_back(u);
+  const size_t n = kept.size();
   const double stride = std::max(1.0, static_cast<double>(n) / config_.max_points);
   for (double k = 0.0; k < n; k += stride) {
-    const size_t i = static_cast<size_t>(k);
-    const Eigen::Vector2d r = eigen(m.reference_px[i]), c = eigen(m.current_px[i]);
-    const double z_ref = reference_depth_(r);
-    if (!std::isfinite(z_ref) || !std::isfinite(current_depth(c))) continue;
+    const size_t u = kept[static_cast<size_t>(k)], i = usable[u];
+    const Eigen::Vector2d r = eigen(m.reference_px[i]);
+    const double z_ref = ref_z[u];
     ids.push_back(static_cast<int>(ref_px_.size()));
     ref_px_.push_back(r);
     ref_px_cv_.push_back(m.reference_px[i]);
@@ -238,6 +300,11 @@ ImageStep ImageServoController::step(const cv::Mat& current_image, const DepthLo
   if (step.status == ServoStatus::kRunning && config_.anchor_below_error > 0.0 &&
       step.error_norm < config_.anchor_below_error)
     anchoring_ = true;
+  if (step.status == ServoStatus::kRunning && step.error_norm < config_.rematch_below_error && !rematched_near_goal_ &&
+      rematches_ < config_.max_rematches) {
+    rematched_near_goal_ = true;
+    force_rematch_ = true;
+  }
   switch (step.status) {
     case ServoStatus::kRunning:
       rec.status = ImageStepStatus::kRunning;

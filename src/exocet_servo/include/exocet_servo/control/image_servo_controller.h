@@ -53,6 +53,16 @@ struct ImageServoConfig {
   /// (PointTracker::anchorOnReference); 0 disables it. [0, 1]
   double anchor_below_error = 0.01;
   double anchor_max_residual_px = 3.0;  ///< of the affine fit, (0, 50]
+  /// Match the whole image again once, when |e| first falls below this (0 disables it), [0, 1]: near the goal the
+  /// current view is nearly the reference view, so SIFT finds many more pairs than across the rig's baseline at the
+  /// start, and more points lower the floor of |e| (the re-anchored points' jitter averages out).
+  double rematch_below_error = 0.002;
+  /// SIFT pairs are also checked in 3D: each pair's two points (back-projected with the depths and the intrinsics
+  /// estimates) must follow one rigid motion, fitted by RANSAC; a pair farther from it than this fraction of its
+  /// depth is an outlier (0 disables the check), [0, 1]. The epipolar RANSAC of the matcher lets through pairs that
+  /// slide along their epipolar lines (repeated texture); with few points across the rig's baseline they are enough
+  /// to send the servo away.
+  double rigid_outlier_fraction = 0.03;
   /// "" or every bad field with its allowed range ("; "-joined).
   std::string validate() const;
 };
@@ -116,6 +126,7 @@ class ImageServoController {
   vision::PointMatcher matcher_;
   vision::PointTracker tracker_;
   std::mt19937 rng_;
+  std::mt19937 ransac_rng_{20261202};  // its own stream: the depth errors do not depend on the RANSAC draws
   std::normal_distribution<double> gauss_{0.0, 1.0};
   cv::Mat reference_image_;
   DepthLookup reference_depth_;
@@ -127,6 +138,7 @@ class ImageServoController {
   std::vector<int> law_ids_;  ///< ids of the law's current reference set
   bool anchoring_ = false;
   bool force_rematch_ = false;
+  bool rematched_near_goal_ = false;
   int iterations_ = 0, rematches_ = 0, initial_matches_ = 0;
 };
 
