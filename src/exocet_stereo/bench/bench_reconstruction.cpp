@@ -2,9 +2,13 @@
 // OpenCV's stored result, and the temple ring (16 real views) reconstructed from poses perturbed by 5 % of the
 // camera-to-object distance and 3 degrees, beside COLMAP (SIFT on CPU, exhaustive matching, incremental mapper with
 // the exact intrinsics held) on the same 16 images. Prints a side-by-side table and writes reconstruction.json.
-//   bench_reconstruction --output-dir out/bench --shared-data /abs/path/shared/data
+// Then the "vent" section (issue 7): dense reconstruction of exocet_servo's simulated vent from a ring of stereo pairs,
+// fused, surfaced and scored against the known geometry; "--only vent" runs it alone and keeps the file's other
+// figures of an earlier run.
+//   bench_reconstruction --output-dir out/bench --shared-data /abs/path/shared/data [--only all|vent]
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -21,10 +25,18 @@
 #include <opencv2/core/persistence.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_servo/sim/point_scene.h"
+#include "exocet_servo/sim/vent_renderer.h"
+#include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/geometry/epipolar.h"
 #include "exocet_stereo/geometry/pose_perturbation.h"
 #include "exocet_stereo/geometry/rig_calibration.h"
 #include "exocet_stereo/geometry/sparse_reconstruction.h"
+#include "exocet_stereo/geometry/stereo_rectification.h"
+#include "exocet_stereo/io/mesh_export.h"
+#include "exocet_stereo/mesh/cloud_fusion.h"
+#include "exocet_stereo/mesh/cloud_surface.h"
+#include "exocet_stereo/mesh/depth_map.h"
 
 namespace {
 
@@ -207,29 +219,347 @@ ColmapOutcome runColmap(const fs::path& temple_dir, const std::vector<PinholeVie
   return best;
 }
 
+// ================= Vent: dense reconstruction of exocet_servo's simulated vent (issue 7) =================
+// A ring of stereo pairs around the ray-cast vent (known geometry), each rectified by our rectification, matched by our
+// dense stereo, turned into a depth map of the rectified left camera; all depth maps fused (multi-view consistency,
+// voxel merge), the fused cloud cropped to a box around the vent (the seabed far away is excluded) and surfaced. The
+// figure is the RMS of the true surface distance over the chimney (points above the seabed) divided by the vent's
+// height (the object's size).
+
+struct VentSettings {
+  int pairs = 10;
+  double ring_radius_m = 0.6;    ///< horizontal distance of the left cameras from the vent's axis
+  double camera_height_m = 0.4;  ///< above the seabed; the cameras look at mid-height of the vent
+  double baseline_m = 0.15;      ///< converged rig: both cameras look at the same point
+  std::string method = "sgm";
+  double seabed_margin_m = 0.005;  ///< points below this height belong to the seabed, not the chimney
+};
+
+/// Exact distance (m) from a point to the vent's surface: in the half-plane (distance from the axis, height) the
+/// surface is the polyline seabed -> base rim -> top rim -> axis. VentRenderer::distanceToSurface() is exact only away
+/// from the rims (just outside the top rim it returns the distance to the seabed, 0.3 m), so it is not used for the
+/// figure.
+double distanceToVent(const exocet_servo::sim::VentSceneConfig& scene, const Eigen::Vector3d& p) {
+  const Eigen::Vector2d q(std::hypot(p.x() - scene.base_m.x(), p.y() - scene.base_m.y()), p.z() - scene.base_m.z());
+  auto toSegment = [&q](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    const double t = std::clamp((q - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+    return (a + t * (b - a) - q).norm();
+  };
+  const Eigen::Vector2d base_rim(scene.base_radius_m, 0.0), top_rim(scene.top_radius_m, scene.height_m);
+  double d = std::min(toSegment(base_rim, top_rim), toSegment(top_rim, Eigen::Vector2d(0.0, scene.height_m)));
+  if (scene.draw_seabed) d = std::min(d, q.x() >= scene.base_radius_m ? std::abs(q.y()) : (q - base_rim).norm());
+  return d;
+}
+
+/// RMS (m) of the true surface distance over the points whose height is at least min_z_m, and their count.
+std::pair<double, long> rmsDistance(const exocet_servo::sim::VentSceneConfig& scene,
+                                    const std::vector<Eigen::Vector3d>& points, double min_z_m) {
+  double sum2 = 0.0;
+  long n = 0;
+  for (const auto& p : points) {
+    if (p.z() < min_z_m) continue;
+    sum2 += std::pow(distanceToVent(scene, p), 2);
+    ++n;
+  }
+  return {n > 0 ? std::sqrt(sum2 / n) : NAN, n};
+}
+
+/// Completeness: the fraction of points sampled every ~spacing_m on the chimney's side and top that have a surface
+/// vertex within reach_m.
+double completeness(const exocet_servo::sim::VentSceneConfig& scene, const std::vector<Eigen::Vector3d>& vertices,
+                    double spacing_m, double reach_m) {
+  auto cellKey = [reach_m](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d c = (p / reach_m).array().floor();
+    return (static_cast<int64_t>(c.x()) + 100000) * 40000000000LL + (static_cast<int64_t>(c.y()) + 100000) * 200000LL +
+           (static_cast<int64_t>(c.z()) + 100000);
+  };
+  std::map<int64_t, std::vector<int>> cells;
+  for (size_t i = 0; i < vertices.size(); ++i) cells[cellKey(vertices[i])].push_back(static_cast<int>(i));
+  auto covered = [&](const Eigen::Vector3d& p) {
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = cells.find(cellKey(p + reach_m * Eigen::Vector3d(dx, dy, dz)));
+          if (it == cells.end()) continue;
+          for (int i : it->second)
+            if ((vertices[i] - p).norm() <= reach_m) return true;
+        }
+    return false;
+  };
+  long samples = 0, hits = 0;
+  const int rings = static_cast<int>(std::ceil(scene.height_m / spacing_m));
+  for (int k = 0; k <= rings; ++k) {  // side
+    const double h = scene.height_m * k / rings;
+    const double r = scene.base_radius_m + (scene.top_radius_m - scene.base_radius_m) * h / scene.height_m;
+    const int n = static_cast<int>(std::ceil(2 * M_PI * r / spacing_m));
+    for (int j = 0; j < n; ++j) {
+      const double a = 2 * M_PI * j / n;
+      ++samples;
+      hits += covered(scene.base_m + Eigen::Vector3d(r * std::cos(a), r * std::sin(a), h)) ? 1 : 0;
+    }
+  }
+  for (double x = -scene.top_radius_m; x <= scene.top_radius_m; x += spacing_m)  // top
+    for (double y = -scene.top_radius_m; y <= scene.top_radius_m; y += spacing_m) {
+      if (std::hypot(x, y) > scene.top_radius_m) continue;
+      ++samples;
+      hits += covered(scene.base_m + Eigen::Vector3d(x, y, scene.height_m)) ? 1 : 0;
+    }
+  return samples > 0 ? static_cast<double>(hits) / samples : NAN;
+}
+
+void benchVent(JsonReport& json, const std::string& output_dir, const VentSettings& settings = VentSettings()) {
+  namespace sim = exocet_servo::sim;
+  namespace mesh = exocet_stereo::mesh;
+  const sim::VentSceneConfig scene;  // 0.3 m high, radius 0.1 m at the base, 0.05 m at the top
+  const sim::VentRenderer renderer(scene);
+  const double object_size_m = scene.height_m;
+  const Eigen::Vector3d target = scene.base_m + Eigen::Vector3d(0, 0, 0.5 * scene.height_m);
+  // The crop box: 1.5 base radii around the axis, from just below the seabed to just above the top.
+  const double half_width_m = 1.5 * scene.base_radius_m;
+  const Eigen::Vector3d box_min = scene.base_m + Eigen::Vector3d(-half_width_m, -half_width_m, -0.01);
+  const Eigen::Vector3d box_max = scene.base_m + Eigen::Vector3d(half_width_m, half_width_m, scene.height_m + 0.01);
+
+  // Two cameras with different (known) intrinsics and no distortion.
+  sim::PinholeCamera left_camera, right_camera;
+  left_camera.k = sim::intrinsics(800.0, 800.0, 319.5, 239.5);
+  right_camera.k = sim::intrinsics(790.0, 792.0, 324.0, 236.0);
+  auto cv3x3 = [](const Eigen::Matrix3d& m) {
+    cv::Mat out(3, 3, CV_64F);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) out.at<double>(r, c) = m(r, c);
+    return out;
+  };
+  auto pairPoses = [&](int i) {
+    const double a = 2.0 * M_PI * i / settings.pairs;
+    const Eigen::Vector3d left_centre =
+        scene.base_m + Eigen::Vector3d(settings.ring_radius_m * std::cos(a), settings.ring_radius_m * std::sin(a),
+                                       settings.camera_height_m);
+    const Eigen::Isometry3d world_T_left = sim::lookAt(left_centre, target);
+    // A fixed rig: the right camera beside the left one, turned inwards (about its y axis) to look at the same point.
+    const double toe_in_rad = std::atan(settings.baseline_m / (target - left_centre).norm());
+    Eigen::Isometry3d left_T_right = Eigen::Isometry3d::Identity();
+    left_T_right.linear() = Eigen::AngleAxisd(-toe_in_rad, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    left_T_right.translation() = Eigen::Vector3d(settings.baseline_m, 0.0, 0.0);
+    return std::make_pair(world_T_left, world_T_left * left_T_right);
+  };
+  // The rig (right from left) is the same for every pair by symmetry: calibrate it from the first.
+  StereoRig rig;
+  {
+    const auto poses = pairPoses(0);
+    const Eigen::Isometry3d right_T_left = poses.second.inverse() * poses.first;
+    rig.image_size = cv::Size(left_camera.width_px, left_camera.height_px);
+    rig.K_left = cv3x3(left_camera.k);
+    rig.K_right = cv3x3(right_camera.k);
+    rig.dist_left = cv::Mat::zeros(1, 5, CV_64F);
+    rig.dist_right = cv::Mat::zeros(1, 5, CV_64F);
+    rig.R = cv3x3(right_T_left.linear());
+    rig.T = (cv::Mat_<double>(3, 1) << right_T_left.translation().x(), right_T_left.translation().y(),
+             right_T_left.translation().z());
+    rig.has_extrinsics = true;
+    rig.updateDerived();
+  }
+  // alpha = -1: OpenCV's default scaling keeps the focal (alpha = 0 would zoom 1.7x into the toed-in views).
+  const Rectification rect = computeRectification(rig, -1.0);
+  Eigen::Matrix3d K_rect, R1;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      K_rect(r, c) = rect.P1.at<double>(r, c);
+      R1(r, c) = rect.R1.at<double>(r, c);
+    }
+  Eigen::Isometry3d left_T_rect = Eigen::Isometry3d::Identity();
+  left_T_rect.linear() = R1.transpose();  // X_rect = R1 X_left
+  const double focal_px = rect.focal_px(), baseline_m = rect.baseline();
+  const double doffs_rect_px = rect.P2.at<double>(0, 2) - rect.P1.at<double>(0, 2);
+
+  double render_s = 0.0, stereo_s = 0.0;
+  std::vector<mesh::DepthView> views;
+  long depth_pixels = 0;
+  int max_disparity_px = 0, offset_px = 0;
+  for (int i = 0; i < settings.pairs; ++i) {
+    const auto poses = pairPoses(i);
+    auto start = Clock::now();
+    const sim::RenderedView left = renderer.render(left_camera, poses.first);
+    const sim::RenderedView right = renderer.render(right_camera, poses.second);
+    render_s += secondsSince(start);
+
+    start = Clock::now();
+    cv::Mat left_rect, right_rect;
+    rectifyPair(rect, left.image, right.image, left_rect, right_rect);
+    mesh::DepthView view;
+    view.K = K_rect;
+    view.world_T_camera = poses.first * left_T_rect;
+    // Search only the disparities of the crop box: shift the right image by the smallest one (doffs takes it back).
+    double d_min = INFINITY, d_max = 0.0;
+    const Eigen::Isometry3d rect_T_world = view.world_T_camera.inverse();
+    for (int corner = 0; corner < 8; ++corner) {
+      const Eigen::Vector3d p((corner & 1) ? box_max.x() : box_min.x(), (corner & 2) ? box_max.y() : box_min.y(),
+                              (corner & 4) ? box_max.z() : box_min.z());
+      const double d = focal_px * baseline_m / (rect_T_world * p).z() - doffs_rect_px;
+      d_min = std::min(d_min, d);
+      d_max = std::max(d_max, d);
+    }
+    offset_px = std::max(0, static_cast<int>(std::floor(d_min)) - 4);
+    const int disparities_px = static_cast<int>(std::ceil(d_max)) + 4 - offset_px;
+    max_disparity_px = std::max(max_disparity_px, disparities_px);
+    cv::Mat right_shifted = cv::Mat::zeros(right_rect.size(), right_rect.type());
+    const int w = right_rect.cols - offset_px;
+    right_rect(cv::Rect(0, 0, w, right_rect.rows)).copyTo(right_shifted(cv::Rect(offset_px, 0, w, right_rect.rows)));
+    exocet_stereo::dense::DenseStereoConfig config =
+        exocet_stereo::dense::defaultConfigFor(settings.method, disparities_px);
+    config.fill_holes = false;  // a filled disparity is no measurement
+    const cv::Mat disparity =
+        exocet_stereo::dense::createDenseStereo(settings.method, config)->compute(left_rect, right_shifted);
+    // Winners at the ends of the search range are points outside it (the far seabed): unknown.
+    cv::Mat in_range = (disparity >= 1.0f) & (disparity <= disparities_px - 1.0f);
+    cv::Mat kept(disparity.size(), CV_32F, cv::Scalar(NAN));
+    disparity.copyTo(kept, in_range);
+    mesh::RectifiedPairGeometry geometry;
+    geometry.focal_px = focal_px;
+    geometry.baseline_m = baseline_m;
+    geometry.doffs_px = offset_px + doffs_rect_px;
+    view.depth_m = mesh::depthFromDisparity(kept, geometry);
+    view.image = left_rect;
+    depth_pixels += cv::countNonZero(view.depth_m == view.depth_m);
+    views.push_back(view);
+    stereo_s += secondsSince(start);
+  }
+
+  auto start = Clock::now();
+  mesh::CloudFusionConfig fusion;
+  fusion.voxel_m = 0.0015;
+  fusion.depth_tolerance = 0.005;
+  fusion.min_confirmations = 2;
+  fusion.max_incidence_deg = 75.0;
+  mesh::CloudFusionStats fusion_stats;
+  const mesh::FusedCloud all = mesh::fuseDepthMaps(views, fusion, &fusion_stats);
+  const mesh::FusedCloud cloud = all.cropped(box_min, box_max);
+  const double fusion_s = secondsSince(start);
+
+  start = Clock::now();
+  mesh::CloudSurfaceConfig surface_config;
+  surface_config.cell_m = 0.002;
+  surface_config.radius_m = 0.006;
+  mesh::CloudSurfaceStats surface_stats;
+  const mesh::TexturedMesh surface = mesh::surfaceFromCloud(cloud, surface_config, &surface_stats);
+  const double surface_s = secondsSince(start);
+  const double total_s = stereo_s + fusion_s + surface_s;
+
+  const double chimney_z = scene.base_m.z() + settings.seabed_margin_m, anywhere = -INFINITY;
+  const auto cloud_rms = rmsDistance(scene, cloud.points, chimney_z);
+  const auto surface_rms = rmsDistance(scene, surface.vertices, chimney_z);
+  const auto cloud_box_rms = rmsDistance(scene, cloud.points, anywhere);
+  const auto surface_box_rms = rmsDistance(scene, surface.vertices, anywhere);
+  const double pct = 100.0 / object_size_m;
+  const double complete = completeness(scene, surface.vertices, 0.002, 0.003);
+
+  if (!surface.empty()) exocet_stereo::io::writePly((fs::path(output_dir) / "vent_surface.ply").string(), surface);
+  json.number("vent_pairs", settings.pairs);
+  json.number("vent_points", static_cast<double>(cloud_rms.second));
+  json.number("vent_rms_pct", surface_rms.first * pct);
+  json.number("vent_cloud_rms_pct", cloud_rms.first * pct);
+  json.number("vent_seconds", total_s);
+  json.number("vent_completeness_pct", complete * 100.0);
+  json.number("vent_surface_rms_mm", surface_rms.first * 1e3);
+  json.number("vent_cloud_rms_mm", cloud_rms.first * 1e3);
+  json.number("vent_box_rms_pct", surface_box_rms.first * pct);
+  json.number("vent_cloud_box_rms_pct", cloud_box_rms.first * pct);
+  json.number("vent_box_points", static_cast<double>(cloud.size()));
+  json.number("vent_surface_vertices", static_cast<double>(surface.vertices.size()));
+  json.number("vent_surface_triangles", static_cast<double>(surface.triangles.size()));
+  json.number("vent_object_size_m", object_size_m);
+  json.number("vent_baseline_m", settings.baseline_m);
+  json.number("vent_stereo_seconds", stereo_s);
+  json.number("vent_fusion_seconds", fusion_s);
+  json.number("vent_surface_seconds", surface_s);
+  json.number("vent_render_seconds", render_s);
+  json.text("vent_method", settings.method);
+
+  std::cout << "\nVent (exocet_servo ray-cast scene, object size = height " << object_size_m
+            << " m): " << settings.pairs << " stereo pairs on a ring of radius " << settings.ring_radius_m
+            << " m, baseline " << settings.baseline_m * 1e3 << " mm, 640x480, dense '" << settings.method
+            << "' over up to " << max_disparity_px << " disparities (the crop box's range, offset " << offset_px
+            << " px in the last pair), " << depth_pixels << " depth pixels\n";
+  std::cout << "fusion: " << fusion_stats.candidates << " candidates, " << fusion_stats.discontinuity
+            << " on discontinuities, " << fusion_stats.oblique << " oblique, " << fusion_stats.unconfirmed
+            << " unconfirmed (< " << fusion.min_confirmations << " other views), " << all.size() << " voxels, "
+            << cloud.size() << " in the box around the vent\n";
+  std::cout << std::left << std::setw(34) << "" << std::setw(12) << "points" << std::setw(12) << "RMS (mm)"
+            << "RMS (% of height)\n";
+  auto row = [&](const std::string& name, const std::pair<double, long>& r) {
+    std::cout << std::left << std::setw(34) << name << std::setw(12) << r.second << std::setw(12)
+              << std::setprecision(3) << r.first * 1e3 << r.first * pct << "\n";
+  };
+  row("fused cloud, chimney", cloud_rms);
+  row("surface vertices, chimney", surface_rms);
+  row("fused cloud, box with seabed", cloud_box_rms);
+  row("surface vertices, box with seabed", surface_box_rms);
+  std::cout << "completeness: " << std::setprecision(3) << complete * 100.0
+            << " % of the true chimney and top (2 mm samples) have a surface vertex within 3 mm\n";
+  std::cout << "time (s): stereo " << stereo_s << ", fusion " << fusion_s << ", surface " << surface_s << ", total "
+            << total_s << " (rendering " << render_s << " not counted); goal RMS <= 0.5 % of the height\n";
+}
+
+/// The figures of an earlier run's JSON except the vent's, so that "--only vent" rewrites the file without losing them.
+std::vector<std::pair<std::string, cv::FileNode>> earlierFigures(const std::string& json_path,
+                                                                 cv::FileStorage& storage) {
+  std::vector<std::pair<std::string, cv::FileNode>> figures;
+  if (!fs::exists(json_path) || !storage.open(json_path, cv::FileStorage::READ | cv::FileStorage::FORMAT_JSON))
+    return figures;
+  for (auto it = storage.root().begin(); it != storage.root().end(); ++it) {
+    const cv::FileNode node = *it;
+    if (node.name().rfind("vent_", 0) != 0 && (node.isReal() || node.isInt() || node.isString()))
+      figures.emplace_back(node.name(), node);
+  }
+  return figures;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output_dir = "out/bench", shared = EXOCET_SHARED_DATA_DIR;
+  std::string output_dir = "out/bench", shared = EXOCET_SHARED_DATA_DIR, only = "all";
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string arg = argv[i];
     if (arg == "--output-dir")
       output_dir = argv[i + 1];
     else if (arg == "--shared-data")
       shared = argv[i + 1];
+    else if (arg == "--only")
+      only = argv[i + 1];
     else {
-      std::cerr << "bench_reconstruction: unknown argument '" << arg << "' (--output-dir DIR --shared-data DIR)\n";
+      std::cerr << "bench_reconstruction: unknown argument '" << arg
+                << "' (--output-dir DIR --shared-data DIR --only all|vent)\n";
       return 2;
     }
   }
+  if (only != "all" && only != "vent") {
+    std::cerr << "bench_reconstruction: --only must be 'all' or 'vent', not '" << only << "'\n";
+    return 2;
+  }
   fs::create_directories(output_dir);
   const std::string json_path = (fs::path(output_dir) / "reconstruction.json").string();
+  // "--only vent" keeps the other sections' figures of an earlier run: read them before the file is rewritten.
+  cv::FileStorage earlier;
+  const auto kept =
+      only == "vent" ? earlierFigures(json_path, earlier) : decltype(earlierFigures(json_path, earlier))();
   JsonReport json(json_path);
   if (!json.ok()) {
     std::cerr << "bench_reconstruction: cannot write " << json_path << "\n";
     return 1;
   }
+  for (const auto& figure : kept) {
+    if (figure.second.isString())
+      json.text(figure.first, figure.second.string());
+    else
+      json.number(figure.first, figure.second.real());
+  }
+  earlier.release();
   try {
+    if (only == "vent") {
+      benchVent(json, output_dir);
+      json.close();
+      std::cout << "written " << json_path << "\n";
+      return 0;
+    }
     // --- Rig calibration on OpenCV's chessboard pairs. ---
     const fs::path board_dir = fs::path(shared) / "stereo_chessboard";
     std::vector<std::string> left, right;
@@ -324,6 +654,8 @@ int main(int argc, char** argv) {
     row("centre error RMS (%)", num(after.rms_pct), num(colmap.centre_err_rms_pct));
     row("wall time (s)", num(ours_s), colmap.ok ? num(colmap.seconds) : "n/a");
     std::cout << "COLMAP: " << colmap.status << "\n";
+
+    benchVent(json, output_dir);
   } catch (const std::exception& e) {
     std::cerr << "bench_reconstruction: " << e.what() << "\n";
     return 1;
