@@ -16,6 +16,9 @@
 
 #include <opencv2/core.hpp>
 
+#include "exocet_servo/control/image_servo_controller.h"
+#include "exocet_servo/control/twist_limit.h"
+#include "exocet_servo/sim/arm_rig_simulator.h"
 #include "exocet_servo/sim/image_servo_loop.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
@@ -150,6 +153,69 @@ int main(int argc, char** argv) {
          match_n > 0 ? 1e3 * match_sum / match_n : NAN, match_n);
 
   std::filesystem::create_directories(output_dir);
+  // ---- Repeated servoing through the arm at image level: the report's circular acquisition ----
+  // Each servoing brings the left camera to where the right one was (the rig transform: 0.3 m, 18 deg), so the
+  // poses follow left_0 (left_T_right)^k; the drift is how far the simulated poses end from that prediction.
+  const int circle_servoings = 3;  // 54 deg of the circle: within the arm's reach from its default pose
+  std::vector<double> circle_step_mm, circle_drift_mm, circle_drift_deg;
+  int circle_images = 0;
+  std::string circle_status = "converged";
+  {
+    sim::ArmRigConfig rig;  // supersampling 2, as the node's simulator
+    sim::ArmRigSimulator arm(rig);
+    control::ImageServoConfig cc;
+    cc.servo.gain = control::AdaptiveGain{2.0, 1.0, 4.0};  // per second at 4 Hz: the node's defaults
+    cc.matcher.ratio = 0.6;
+    const double dt = 0.25;
+    const Eigen::Isometry3d left_0 = arm.worldFromLeft();
+    Eigen::Isometry3d predicted = left_0;
+    for (int k = 0; k < circle_servoings && circle_status == "converged"; ++k) {
+      const sim::StereoViews start = arm.render();
+      const Eigen::Isometry3d target = arm.worldFromRight();
+      predicted = predicted * arm.leftFromRight();
+      control::ImageServoController controller(cc, rig.right_camera.k, rig.left_camera.k, rig.left_camera.width_px,
+                                               rig.left_camera.height_px);
+      const auto lookup = [&cc](const sim::RenderedView& view) {
+        return [&view, &cc](const Eigen::Vector2d& px) {
+          double d = 0.0;
+          return view.smoothDepthAt(px, cc.depth_check_radius_px, cc.depth_max_relative_step, &d) ? d : NAN;
+        };
+      };
+      controller.setReference(start.right.image, lookup(start.right));
+      control::ImageStep step;
+      sim::ResolvedRate last_rate;
+      for (int it = 0; it < 200; ++it) {
+        const sim::StereoViews views = arm.render();
+        step = controller.step(views.left.image, lookup(views.left));
+        ++circle_images;
+        if (step.status != control::ImageStepStatus::kRunning) break;
+        last_rate = arm.command(control::limitTwist(step.velocity, 0.3, 1.0), dt);
+      }
+      if (step.status != control::ImageStepStatus::kConverged) {
+        const sim::PoseError e = sim::poseError(arm.worldFromLeft(), target);
+        char text[200];
+        std::snprintf(text, sizeof(text), " (|e| %.5f, %d points, %.2f mm / %.3f deg from the target)",
+                      step.error_norm, step.points, e.position_mm, e.rotation_deg);
+        circle_status = (step.status == control::ImageStepStatus::kRunning ? std::string("not converged in 200 images")
+                                                                            : control::toString(step.status)) +
+                        " at servoing " + std::to_string(k + 1) + ": " + step.message + text + "; arm: " +
+                        sim::toString(last_rate.status) + " " + last_rate.message;
+        break;
+      }
+      circle_step_mm.push_back(sim::poseError(arm.worldFromLeft(), target).position_mm);
+      const sim::PoseError drift = sim::poseError(arm.worldFromLeft(), predicted);
+      circle_drift_mm.push_back(drift.position_mm);
+      circle_drift_deg.push_back(drift.rotation_deg);
+    }
+  }
+  printf("\n== Repeated servoing through the arm (image level, 0.3 m / 18 deg rig, node's gains at 4 Hz), %d servoings\n",
+         circle_servoings);
+  for (size_t k = 0; k < circle_step_mm.size(); ++k)
+    printf("servoing %zu: %.3f mm from the right camera's pose; drift from the predicted circle %.3f mm %.4f deg\n",
+           k + 1, circle_step_mm[k], circle_drift_mm[k], circle_drift_deg[k]);
+  printf("%s, %d images in all\n", circle_status.c_str(), circle_images);
+  const double circle_drift_end_mm = circle_drift_mm.empty() ? NAN : circle_drift_mm.back();
+
   const std::string path = output_dir + "/servo_image.json";
   std::ofstream out(path);
   if (!out) {
@@ -177,6 +243,11 @@ int main(int argc, char** argv) {
       << "  \"control_points_mean\": " << num(control_n > 0 ? static_cast<double>(points_sum) / control_n : NAN)
       << ",\n"
       << "  \"sift_match_ms_mean\": " << num(match_n > 0 ? 1e3 * match_sum / match_n : NAN) << ",\n"
+      << "  \"arm_circle_servoings\": " << circle_drift_mm.size() << ",\n"
+      << "  \"arm_circle_status\": \"" << circle_status << "\",\n"
+      << "  \"arm_circle_images\": " << circle_images << ",\n"
+      << "  \"arm_circle_drift_end_mm\": " << num(circle_drift_end_mm) << ",\n"
+      << "  \"arm_circle_drift_end_deg\": " << num(circle_drift_deg.empty() ? NAN : circle_drift_deg.back()) << ",\n"
       << "  \"starts\": [\n";
   for (size_t s = 0; s < results.size(); ++s) {
     const auto& r = results[s];
