@@ -36,6 +36,7 @@
 #include "exocet_stereo/io/mesh_export.h"
 #include "exocet_stereo/mesh/cloud_fusion.h"
 #include "exocet_stereo/mesh/cloud_surface.h"
+#include "exocet_stereo/mesh/pair_depth.h"
 #include "exocet_stereo/mesh/depth_map.h"
 
 namespace {
@@ -323,12 +324,7 @@ void benchVent(JsonReport& json, const std::string& output_dir, const VentSettin
   sim::PinholeCamera left_camera, right_camera;
   left_camera.k = sim::intrinsics(800.0, 800.0, 319.5, 239.5);
   right_camera.k = sim::intrinsics(790.0, 792.0, 324.0, 236.0);
-  auto cv3x3 = [](const Eigen::Matrix3d& m) {
-    cv::Mat out(3, 3, CV_64F);
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) out.at<double>(r, c) = m(r, c);
-    return out;
-  };
+
   auto pairPoses = [&](int i) {
     const double a = 2.0 * M_PI * i / settings.pairs;
     const Eigen::Vector3d left_centre =
@@ -342,35 +338,6 @@ void benchVent(JsonReport& json, const std::string& output_dir, const VentSettin
     left_T_right.translation() = Eigen::Vector3d(settings.baseline_m, 0.0, 0.0);
     return std::make_pair(world_T_left, world_T_left * left_T_right);
   };
-  // The rig (right from left) is the same for every pair by symmetry: calibrate it from the first.
-  StereoRig rig;
-  {
-    const auto poses = pairPoses(0);
-    const Eigen::Isometry3d right_T_left = poses.second.inverse() * poses.first;
-    rig.image_size = cv::Size(left_camera.width_px, left_camera.height_px);
-    rig.K_left = cv3x3(left_camera.k);
-    rig.K_right = cv3x3(right_camera.k);
-    rig.dist_left = cv::Mat::zeros(1, 5, CV_64F);
-    rig.dist_right = cv::Mat::zeros(1, 5, CV_64F);
-    rig.R = cv3x3(right_T_left.linear());
-    rig.T = (cv::Mat_<double>(3, 1) << right_T_left.translation().x(), right_T_left.translation().y(),
-             right_T_left.translation().z());
-    rig.has_extrinsics = true;
-    rig.updateDerived();
-  }
-  // alpha = -1: OpenCV's default scaling keeps the focal (alpha = 0 would zoom 1.7x into the toed-in views).
-  const Rectification rect = computeRectification(rig, -1.0);
-  Eigen::Matrix3d K_rect, R1;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) {
-      K_rect(r, c) = rect.P1.at<double>(r, c);
-      R1(r, c) = rect.R1.at<double>(r, c);
-    }
-  Eigen::Isometry3d left_T_rect = Eigen::Isometry3d::Identity();
-  left_T_rect.linear() = R1.transpose();  // X_rect = R1 X_left
-  const double focal_px = rect.focal_px(), baseline_m = rect.baseline();
-  const double doffs_rect_px = rect.P2.at<double>(0, 2) - rect.P1.at<double>(0, 2);
-
   double render_s = 0.0, stereo_s = 0.0;
   std::vector<mesh::DepthView> views;
   long depth_pixels = 0;
@@ -378,49 +345,35 @@ void benchVent(JsonReport& json, const std::string& output_dir, const VentSettin
   for (int i = 0; i < settings.pairs; ++i) {
     const auto poses = pairPoses(i);
     auto start = Clock::now();
-    const sim::RenderedView left = renderer.render(left_camera, poses.first);
-    const sim::RenderedView right = renderer.render(right_camera, poses.second);
+    mesh::CalibratedPair pair;
+    pair.left = renderer.render(left_camera, poses.first).image;
+    pair.right = renderer.render(right_camera, poses.second).image;
+    pair.K_left = left_camera.k;
+    pair.K_right = right_camera.k;
+    pair.world_T_left = poses.first;
+    pair.world_T_right = poses.second;
     render_s += secondsSince(start);
 
     start = Clock::now();
-    cv::Mat left_rect, right_rect;
-    rectifyPair(rect, left.image, right.image, left_rect, right_rect);
-    mesh::DepthView view;
-    view.K = K_rect;
-    view.world_T_camera = poses.first * left_T_rect;
-    // Search only the disparities of the crop box: shift the right image by the smallest one (doffs takes it back).
-    double d_min = INFINITY, d_max = 0.0;
-    const Eigen::Isometry3d rect_T_world = view.world_T_camera.inverse();
+    // Search only the depths of the crop box (its corners in the left camera, 2 % margin).
+    mesh::PairDepthConfig depth_config;
+    depth_config.method = settings.method;
+    double z_min = INFINITY, z_max = 0.0;
+    const Eigen::Isometry3d left_T_world = poses.first.inverse();
     for (int corner = 0; corner < 8; ++corner) {
       const Eigen::Vector3d p((corner & 1) ? box_max.x() : box_min.x(), (corner & 2) ? box_max.y() : box_min.y(),
                               (corner & 4) ? box_max.z() : box_min.z());
-      const double d = focal_px * baseline_m / (rect_T_world * p).z() - doffs_rect_px;
-      d_min = std::min(d_min, d);
-      d_max = std::max(d_max, d);
+      const double z = (left_T_world * p).z();
+      z_min = std::min(z_min, z);
+      z_max = std::max(z_max, z);
     }
-    offset_px = std::max(0, static_cast<int>(std::floor(d_min)) - 4);
-    const int disparities_px = static_cast<int>(std::ceil(d_max)) + 4 - offset_px;
-    max_disparity_px = std::max(max_disparity_px, disparities_px);
-    cv::Mat right_shifted = cv::Mat::zeros(right_rect.size(), right_rect.type());
-    const int w = right_rect.cols - offset_px;
-    right_rect(cv::Rect(0, 0, w, right_rect.rows)).copyTo(right_shifted(cv::Rect(offset_px, 0, w, right_rect.rows)));
-    exocet_stereo::dense::DenseStereoConfig config =
-        exocet_stereo::dense::defaultConfigFor(settings.method, disparities_px);
-    config.fill_holes = false;  // a filled disparity is no measurement
-    const cv::Mat disparity =
-        exocet_stereo::dense::createDenseStereo(settings.method, config)->compute(left_rect, right_shifted);
-    // Winners at the ends of the search range are points outside it (the far seabed): unknown.
-    cv::Mat in_range = (disparity >= 1.0f) & (disparity <= disparities_px - 1.0f);
-    cv::Mat kept(disparity.size(), CV_32F, cv::Scalar(NAN));
-    disparity.copyTo(kept, in_range);
-    mesh::RectifiedPairGeometry geometry;
-    geometry.focal_px = focal_px;
-    geometry.baseline_m = baseline_m;
-    geometry.doffs_px = offset_px + doffs_rect_px;
-    view.depth_m = mesh::depthFromDisparity(kept, geometry);
-    view.image = left_rect;
-    depth_pixels += cv::countNonZero(view.depth_m == view.depth_m);
-    views.push_back(view);
+    depth_config.min_depth_m = 0.98 * z_min;
+    depth_config.max_depth_m = 1.02 * z_max;
+    mesh::PairDepthStats pair_stats;
+    views.push_back(mesh::depthFromPair(pair, depth_config, &pair_stats));
+    depth_pixels += pair_stats.depth_pixels;
+    max_disparity_px = std::max(max_disparity_px, pair_stats.disparities_px);
+    offset_px = pair_stats.offset_px;
     stereo_s += secondsSince(start);
   }
 
