@@ -89,6 +89,13 @@ DepthView depthFromPair(const CalibratedPair& pair, const PairDepthConfig& confi
   const double d_max = focal_px * baseline_m / config.min_depth_m - doffs_rect_px;
   const int offset_px = std::max(0, static_cast<int>(std::floor(d_min)) - 2);
   const int disparities_px = std::max(16, static_cast<int>(std::ceil(d_max)) + 2 - offset_px);
+  if (disparities_px > 512) {
+    std::ostringstream msg;
+    msg << "depthFromPair: the depth range [" << config.min_depth_m << ", " << config.max_depth_m << "] m spans "
+        << disparities_px << " disparities at this baseline (" << baseline_m << " m) and focal (" << focal_px
+        << " px); at most 512: narrow the range";
+    throw std::invalid_argument(msg.str());
+  }
   cv::Mat right_shifted = cv::Mat::zeros(right_rect.size(), right_rect.type());
   const int w = right_rect.cols - offset_px;
   if (w > 0)
