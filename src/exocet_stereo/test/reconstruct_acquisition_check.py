@@ -11,7 +11,9 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 
 PKG = 'exocet_stereo'
 BASE = np.array([1.3, 0.0, -0.2])
@@ -73,6 +75,34 @@ class ReconstructAcquisition(unittest.TestCase):
             rospy.loginfo('%s: %d points on the chimney, RMS %.3f mm = %.3f %% of the height', name,
                           chimney.sum(), 1000.0 * HEIGHT * rms_pct / 100.0, rms_pct)
             self.assertLess(rms_pct, bound_pct, name)
+        cli_points = len(read_ply_vertices(os.path.join(out, 'fused_cloud.ply')))
+
+        # The node: the same reconstruction on ~reconstruct, the cloud and the surface published for rviz.
+        received = {}
+        progress = {'text': None}
+        rospy.Subscriber('/reconstruction/cloud', PointCloud2, lambda m: received.update(cloud=m))
+        # The marker's Python message package is not installed here: its serialised size says it holds the triangles.
+        rospy.Subscriber('/reconstruction/surface', rospy.AnyMsg, lambda m: received.update(surface=m))
+        rospy.Subscriber('/reconstruction/progress', String, lambda m: progress.update(text=m.data))
+        rospy.wait_for_service('/reconstruction/reconstruct', 30.0)
+        answer = rospy.ServiceProxy('/reconstruction/reconstruct', Trigger)()
+        self.assertTrue(answer.success, answer.message)
+        deadline = time.time() + 300.0
+        while time.time() < deadline and not rospy.is_shutdown():
+            text = progress['text'] or ''
+            if (text.startswith('done') or text.startswith('failed')) and 'cloud' in received and 'surface' in received:
+                break
+            if text.startswith('failed'):
+                break
+            time.sleep(0.2)
+        self.assertTrue((progress['text'] or '').startswith('done'), progress['text'])
+        cloud = received['cloud']
+        rospy.loginfo('reconstruction_node: %s; cloud %d points, surface about %d triangles', progress['text'],
+                      cloud.width * cloud.height, len(received['surface']._buff) // 24 // 3)
+        self.assertEqual(cloud.header.frame_id, 'arm_base')
+        self.assertEqual(cloud.width * cloud.height, cli_points)
+        self.assertGreater(len(received['surface']._buff), 24 * 3000)  # 3000 vertices of 3 doubles
+        self.assertTrue(os.path.exists('/tmp/exocet_reconstruction_node_test/surface.wrl'))
 
 
 if __name__ == '__main__':
