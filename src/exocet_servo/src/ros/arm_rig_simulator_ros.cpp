@@ -124,7 +124,10 @@ void ArmRigSimulatorRos::onTick(const ros::TimerEvent&) {
   Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // Each command moves the arm for one period, once: a servo that falls behind (a loaded machine) makes the arm
+    // wait instead of repeating a velocity computed from an older image (which overshoots and loses the object).
     if (have_command_ && (ros::Time::now() - command_stamp_).toSec() <= config_.command_timeout_s) twist = command_;
+    have_command_ = false;
   }
   const sim::ResolvedRate rate = sim_->command(twist, dt_s);
   if (rate.status == sim::ArmStatus::kJointLimit || rate.status == sim::ArmStatus::kInvalidInput)

@@ -1,7 +1,8 @@
 /**
  * @file arm_rig_simulator_ros.h
  * @brief ROS bridge of sim::ArmRigSimulator (the 6-DOF arm carrying the stereo rig in front of the vent): at
- * ~rate_hz it applies the latest camera velocity command (held until ~command_timeout_s), then publishes both
+ * ~rate_hz it applies the latest camera velocity command for one period, once (and only when younger than
+ * ~command_timeout_s; without a new command the arm stays: a late servo makes it wait), then publishes both
  * cameras' images, depth maps and camera_info, the joint states and tf. The depth maps stand for the rig's stereo
  * triangulation (the servo needs the points' depths).
  *
