@@ -259,6 +259,7 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   nav.get("nav_rate_hz", &n.nav_rate_hz);
   nav.get("dr_sigma_per_m", &n.dr_sigma_per_m);
   nav.get("dr_launch_sigma_m", &n.dr_launch_sigma_m);
+  nav.get("heading_alignment_sigma_rad", &n.heading_alignment_sigma_rad);
   nav.get("depth_rate_hz", &n.depth_rate_hz);
   nav.get("depth_noise_m", &n.depth_noise_m);
   nav.get("altimeter_rate_hz", &n.altimeter_rate_hz);
@@ -427,7 +428,8 @@ std::string toYaml(const DiveDescription& d) {
       {"gyro_bias_walk_rps_sqrt_s", n.gyro_bias_walk_rps_sqrt_s}, {"attitude_noise_rad", n.attitude_noise_rad},
       {"accel_noise_mps2", n.accel_noise_mps2}, {"dvl_rate_hz", n.dvl_rate_hz}, {"dvl_noise_mps", n.dvl_noise_mps},
       {"dvl_scale_error", n.dvl_scale_error}, {"nav_rate_hz", n.nav_rate_hz}, {"dr_sigma_per_m", n.dr_sigma_per_m},
-      {"dr_launch_sigma_m", n.dr_launch_sigma_m}, {"depth_rate_hz", n.depth_rate_hz}, {"depth_noise_m", n.depth_noise_m},
+      {"dr_launch_sigma_m", n.dr_launch_sigma_m}, {"heading_alignment_sigma_rad", n.heading_alignment_sigma_rad},
+      {"depth_rate_hz", n.depth_rate_hz}, {"depth_noise_m", n.depth_noise_m},
       {"altimeter_rate_hz", n.altimeter_rate_hz}, {"altimeter_noise_m", n.altimeter_noise_m},
       {"altimeter_max_range_m", n.altimeter_max_range_m}, {"usbl_rate_hz", n.usbl_rate_hz},
       {"usbl_noise_m", n.usbl_noise_m}, {"usbl_vertical_noise_m", n.usbl_vertical_noise_m},

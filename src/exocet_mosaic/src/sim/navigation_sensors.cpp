@@ -35,6 +35,7 @@ std::string NavigationSensorConfig::validate() const {
   checkRange(err, "nav_rate_hz", nav_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
   checkRange(err, "dr_sigma_per_m", dr_sigma_per_m, 0.0, 1.0, "m/m");
   checkRange(err, "dr_launch_sigma_m", dr_launch_sigma_m, 0.0, 100.0, "m");
+  checkRange(err, "heading_alignment_sigma_rad", heading_alignment_sigma_rad, 0.0, 0.5, "rad");
   checkRange(err, "depth_rate_hz", depth_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
   checkRange(err, "depth_noise_m", depth_noise_m, 0.0, 10.0, "m");
   checkRange(err, "altimeter_rate_hz", altimeter_rate_hz, 0.1, imu_rate_hz, "Hz (at most imu_rate_hz)");
@@ -74,6 +75,7 @@ NavigationSensorSimulator::NavigationSensorSimulator(const NavigationSensorConfi
                                init.gaussian(config_.gyro_bias_rps));
   dvl_scale_ = 1.0 + init.gaussian(config_.dvl_scale_error);
   launch_error_m_ = Eigen::Vector2d(init.gaussian(config_.dr_launch_sigma_m), init.gaussian(config_.dr_launch_sigma_m));
+  heading_error_rad_ = init.gaussian(config_.heading_alignment_sigma_rad);
 }
 
 Eigen::Vector3d NavigationSensorSimulator::toWorld(const Eigen::Vector3d& local) const {
@@ -128,6 +130,7 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
     dr_position_local_ = s.position_m;
     dr_position_local_.head<2>() += launch_error_m_;
     dvl_measured_ = R.transpose() * s.velocity_mps;
+    dr_velocity_world_ = s.velocity_mps;
     initialised_ = true;
   } else {
     for (int i = 0; i < 3; ++i) gyro_bias_[i] += rng_imu_.gaussian(config_.gyro_bias_walk_rps_sqrt_s * std::sqrt(dt));
@@ -146,15 +149,17 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
   const double yaw_m = s.yaw_rad + heading_error_rad_;
   const Eigen::Matrix3d R_measured = rotationFromRpy(roll_m, pitch_m, yaw_m);
 
+  // Specific force, drawn whether or not it is recorded (the dead reckoning uses it between DVL pings).
+  const Eigen::Vector3d specific_force_mps2 =
+      R.transpose() * (s.acceleration_mps2 + Eigen::Vector3d(0, 0, kGravity_mps2)) +
+      Eigen::Vector3d(rng_imu_.gaussian(config_.accel_noise_mps2), rng_imu_.gaussian(config_.accel_noise_mps2),
+                      rng_imu_.gaussian(config_.accel_noise_mps2));
   if (sinks.imu) {
     ImuRecord imu;
     imu.stamp_s = stamp;
     imu.orientation = Eigen::Quaterniond(R_measured);
     imu.angular_velocity_rps = measured_rate;
-    imu.linear_acceleration_mps2 = R.transpose() * (s.acceleration_mps2 + Eigen::Vector3d(0, 0, kGravity_mps2)) +
-                                   Eigen::Vector3d(rng_imu_.gaussian(config_.accel_noise_mps2),
-                                                   rng_imu_.gaussian(config_.accel_noise_mps2),
-                                                   rng_imu_.gaussian(config_.accel_noise_mps2));
+    imu.linear_acceleration_mps2 = specific_force_mps2;
     imu.orientation_sigma_rad = config_.attitude_noise_rad;
     imu.angular_velocity_sigma_rps = config_.gyro_noise_rps;
     imu.linear_acceleration_sigma_mps2 = config_.accel_noise_mps2;
@@ -173,9 +178,12 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
                                                           rng_dvl_.gaussian(config_.dvl_noise_mps),
                                                           rng_dvl_.gaussian(config_.dvl_noise_mps));
     if (sinks.dvl) sinks.dvl({stamp, dvl_measured_, config_.dvl_noise_mps});
+    dr_velocity_world_ = R_measured * dvl_measured_;
+  } else if (tick > 0) {
+    dr_velocity_world_ += (R_measured * specific_force_mps2 - Eigen::Vector3d(0, 0, kGravity_mps2)) * dt;
   }
   if (tick > 0) {
-    const Eigen::Vector3d v_world = R_measured * dvl_measured_;
+    const Eigen::Vector3d& v_world = dr_velocity_world_;
     dr_position_local_.x() += v_world.x() * dt;
     dr_position_local_.y() += v_world.y() * dt;
     dr_distance_m_ += v_world.head<2>().norm() * dt;

@@ -32,6 +32,8 @@ struct NavigationSensorConfig {
   double nav_rate_hz = 10.0;           ///< dead-reckoning output rate
   double dr_sigma_per_m = 0.01;        ///< reported position sigma growth per metre travelled (for the covariance)
   double dr_launch_sigma_m = 0.01;     ///< 1-sigma of the launch point's horizontal error, each axis (DR start)
+  /// 1-sigma of the heading's error at launch (rad): the attitude sensor's alignment, shared by the DR and the images.
+  double heading_alignment_sigma_rad = 0.0;
   double depth_rate_hz = 10.0;
   double depth_noise_m = 0.02;
   double altimeter_rate_hz = 10.0;
@@ -97,6 +99,9 @@ class NavigationSensorSimulator {
   double heading_error_rad_ = 0.0;
   Eigen::Vector3d dr_position_local_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d dvl_measured_ = Eigen::Vector3d::Zero();
+  /// The dead reckoning's velocity (world): the last DVL velocity carried forward with the accelerometers between
+  /// pings, as a DVL-aided INS does (holding the last ping would lag by half a DVL period whenever the speed changes).
+  Eigen::Vector3d dr_velocity_world_ = Eigen::Vector3d::Zero();
   double dr_distance_m_ = 0.0;
   double last_depth_m_ = 0.0;
   long imu_ticks_ = -1;  ///< index of the last IMU tick processed
