@@ -59,7 +59,8 @@ class ServoClosedLoop(unittest.TestCase):
         self.assertTrue(answer.success, answer.message)
         target_p, target_r = pose_of(self.buffer, RIGHT)
         start_p, _ = pose_of(self.buffer, LEFT)
-        status = self.wait_status(lambda s: s != 'servoing', 300.0)
+        # The latched status may still say 'idle' until the servo's first iteration: wait past both.
+        status = self.wait_status(lambda s: s not in ('servoing', 'idle'), 300.0)
         self.assertIsNotNone(status)
         self.assertTrue(status.startswith('converged'), status)
         time.sleep(1.0)  # the last tf

@@ -139,7 +139,17 @@ void ArmRigSimulatorRos::onTick(const ros::TimerEvent&) {
 }
 
 void ArmRigSimulatorRos::publishViews(const ros::Time& stamp) {
-  const sim::StereoViews views = sim_->render();
+  sim::StereoViews views = sim_->render();
+  // ~hide_scene (read at every tick, so that a test can set it while the node runs): both cameras see open water, as
+  // when the rig looks away or the water turns turbid; the servo must stop on lost tracking.
+  bool hide_scene = false;
+  pnh_.getParamCached("hide_scene", hide_scene);
+  if (hide_scene) {
+    for (sim::RenderedView* view : {&views.left, &views.right}) {
+      view->image.setTo(cv::Scalar(sim_->config().scene.water_gray));
+      view->depth_m.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
+    }
+  }
   const auto publish = [&](const sim::RenderedView& view, const sim::PinholeCamera& camera, const std::string& frame,
                            ros::Publisher& image_pub, ros::Publisher& depth_pub, ros::Publisher& info_pub) {
     std_msgs::Header header;

@@ -1,7 +1,10 @@
 #include "exocet_servo/ros/servo_ros.h"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
+#include <set>
+#include <sstream>
 #include <stdexcept>
 
 #include <cv_bridge/cv_bridge.h>
@@ -11,6 +14,7 @@
 
 #include "exocet_mosaic/ros/parameter_reader.h"
 #include "exocet_servo/control/twist_limit.h"
+#include "exocet_servo/sim/arm_kinematics.h"
 #include "exocet_servo/sim/vent_renderer.h"
 
 namespace exocet_servo {
@@ -62,14 +66,146 @@ cv::Mat depthOf(const sensor_msgs::Image& msg, std::string* error) {
 control::DepthLookup lookupIn(const cv::Mat& depth_m, const control::ImageServoConfig& config) {
   auto view = std::make_shared<sim::RenderedView>();
   view->depth_m = depth_m;
-  return [view, radius = config.depth_check_radius_px, step = config.depth_max_relative_step](
-             const Eigen::Vector2d& px) {
-    double d = 0.0;
-    return view->smoothDepthAt(px, radius, step, &d) ? d : std::numeric_limits<double>::quiet_NaN();
-  };
+  return
+      [view, radius = config.depth_check_radius_px, step = config.depth_max_relative_step](const Eigen::Vector2d& px) {
+        double d = 0.0;
+        return view->smoothDepthAt(px, radius, step, &d) ? d : std::numeric_limits<double>::quiet_NaN();
+      };
+}
+
+std::string fixed(double value, int decimals = 3) {
+  char text[64];
+  std::snprintf(text, sizeof(text), "%.*f", decimals, value);
+  return text;
+}
+
+/// A list parameter of `size` numbers (any size when size < 0); untouched when the parameter is not set.
+/// @throws std::invalid_argument naming the parameter, what it must be and what it got.
+void readNumberList(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
+                    int size, std::vector<double>* values, const std::string& meaning) {
+  XmlRpc::XmlRpcValue raw;
+  if (!nh.getParam(name, raw)) return;
+  const std::string expected = (size >= 0 ? "a list of " + std::to_string(size) + " numbers" : "a list of numbers");
+  if (raw.getType() != XmlRpc::XmlRpcValue::TypeArray || (size >= 0 && raw.size() != size))
+    throw std::invalid_argument(reader.describe(name) + " must be " + expected + " (" + meaning + ")");
+  std::vector<double> out;
+  for (int i = 0; i < raw.size(); ++i) {
+    if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeDouble)
+      out.push_back(static_cast<double>(raw[i]));
+    else if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeInt)
+      out.push_back(static_cast<int>(raw[i]));
+    else
+      throw std::invalid_argument(reader.describe(name) + " must be " + expected + " (" + meaning + "), item " +
+                                  std::to_string(i) + " is not a number");
+    if (!std::isfinite(out.back()))
+      throw std::invalid_argument(reader.describe(name) + ": item " + std::to_string(i) + " is not finite (" + meaning +
+                                  ")");
+  }
+  *values = out;
+}
+
+void readVector3(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
+                 Eigen::Vector3d* value, const std::string& meaning) {
+  std::vector<double> v(value->data(), value->data() + 3);
+  readNumberList(reader, nh, name, 3, &v, meaning);
+  *value = Eigen::Vector3d(v[0], v[1], v[2]);
+}
+
+void readStringList(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
+                    std::vector<std::string>* values, const std::string& meaning) {
+  XmlRpc::XmlRpcValue raw;
+  if (!nh.getParam(name, raw)) return;
+  std::vector<std::string> out;
+  if (raw.getType() == XmlRpc::XmlRpcValue::TypeArray) {
+    for (int i = 0; i < raw.size(); ++i) {
+      if (raw[i].getType() != XmlRpc::XmlRpcValue::TypeString) {
+        out.clear();
+        break;
+      }
+      out.push_back(static_cast<std::string>(raw[i]));
+    }
+  }
+  if (out.empty())
+    throw std::invalid_argument(reader.describe(name) + " must be a non-empty list of strings (" + meaning + ")");
+  *values = out;
 }
 
 }  // namespace
+
+JointSafetyConfig JointSafetyConfig::simulatedArm() {
+  JointSafetyConfig c;
+  const sim::ArmModelConfig arm = sim::ArmModel::defaultConfig();
+  for (int j = 0; j < sim::kArmJoints; ++j) {
+    c.names.push_back("joint_" + std::to_string(j + 1));  // the simulator's names
+    c.min_rad.push_back(arm.joints[j].min_rad);
+    c.max_rad.push_back(arm.joints[j].max_rad);
+    c.max_velocity_rad_s.push_back(arm.joints[j].max_velocity_rad_s);
+  }
+  return c;
+}
+
+std::string JointSafetyConfig::validate() const {
+  std::ostringstream errors;
+  auto check = [&errors](bool ok, const std::string& what) {
+    if (ok) return;
+    if (errors.tellp() > 0) errors << "; ";
+    errors << what;
+  };
+  const size_t n = names.size();
+  check(n >= 1 && min_rad.size() == n && max_rad.size() == n && max_velocity_rad_s.size() == n,
+        "joint_names, joint_min_rad, joint_max_rad, joint_max_velocity_rad_s must have the same length >= 1 (got " +
+            std::to_string(n) + ", " + std::to_string(min_rad.size()) + ", " + std::to_string(max_rad.size()) + ", " +
+            std::to_string(max_velocity_rad_s.size()) + ")");
+  const std::set<std::string> unique(names.begin(), names.end());
+  check(unique.size() == n && !unique.count(""), "joint_names must be unique and non-empty");
+  for (size_t j = 0; j < n && j < min_rad.size() && j < max_rad.size(); ++j)
+    check(min_rad[j] < max_rad[j] && max_rad[j] - min_rad[j] > 2.0 * margin_rad,
+          "joint " + names[j] +
+              ": joint_min_rad < joint_max_rad with more than 2 x joint_margin_rad between them (got " +
+              fixed(min_rad[j]) + ", " + fixed(max_rad[j]) + ")");
+  for (size_t j = 0; j < n && j < max_velocity_rad_s.size(); ++j)
+    check(max_velocity_rad_s[j] > 0.0 && max_velocity_rad_s[j] <= 100.0,
+          "joint " + names[j] + ": joint_max_velocity_rad_s must be in (0, 100]");
+  check(margin_rad >= 0.0 && margin_rad <= 1.0, "joint_margin_rad must be in [0, 1]");
+  check(lookahead_s >= 0.0 && lookahead_s <= 10.0, "joint_lookahead_s must be in [0, 10]");
+  check(velocity_tolerance >= 0.0 && velocity_tolerance <= 10.0, "joint_velocity_tolerance must be in [0, 10]");
+  check(max_age_s > 0.0 && max_age_s <= 60.0, "joint_state_max_age_s must be in (0, 60]");
+  return errors.str();
+}
+
+std::string checkJointState(const JointSafetyConfig& config, const sensor_msgs::JointState& state) {
+  for (size_t j = 0; j < config.names.size(); ++j) {
+    const std::string& name = config.names[j];
+    size_t k = 0;
+    while (k < state.name.size() && state.name[k] != name) ++k;
+    if (k == state.name.size() || k >= state.position.size()) return name + " has no position in the joint state";
+    const double q = state.position[k];
+    // No velocity (an arm that publishes positions only): the position alone is checked.
+    const double dq = k < state.velocity.size() ? state.velocity[k] : 0.0;
+    if (!std::isfinite(q) || !std::isfinite(dq))
+      return name + ": position " + fixed(q) + " rad, velocity " + fixed(dq) + " rad/s are not finite";
+    const double limit_v = config.max_velocity_rad_s[j];
+    if (std::abs(dq) > (1.0 + config.velocity_tolerance) * limit_v)
+      return name + " moving at " + fixed(dq) + " rad/s is beyond its velocity limit " + fixed(limit_v) + " rad/s (+" +
+             fixed(100.0 * config.velocity_tolerance, 0) + " %)";
+    // Where the joint may be by the next check, whatever the command (at most its velocity limit for lookahead_s):
+    // a stop then comes before the limit, not after it.
+    const double reach = limit_v * config.lookahead_s;
+    const bool upper = q + reach > config.max_rad[j] - config.margin_rad;
+    const bool lower = q - reach < config.min_rad[j] + config.margin_rad;
+    if (!upper && !lower) continue;
+    std::string m = name + " at " + fixed(q) + " rad";
+    if (reach > 0.0)
+      m += " could reach " + fixed(upper ? q + reach : q - reach) + " rad in " + fixed(config.lookahead_s, 2) +
+           " s at its " + fixed(limit_v) + " rad/s limit,";
+    if (upper)
+      m += " beyond its upper limit " + fixed(config.max_rad[j]) + " rad - margin " + fixed(config.margin_rad) + " rad";
+    else
+      m += " beyond its lower limit " + fixed(config.min_rad[j]) + " rad + margin " + fixed(config.margin_rad) + " rad";
+    return m;
+  }
+  return "";
+}
 
 ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
   ServoNodeConfig c;
@@ -94,11 +230,61 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
   p.readPositiveDouble("max_angular_speed_rps", &c.max_angular_speed_rps, 10.0, "camera rotation speed limit (rad/s)");
   const std::string problems = s.validate();
   if (!problems.empty()) throw std::invalid_argument("servo parameters: " + problems);
+
+  // Safety stops (servo_safety.h): the servo's own budget replaces the monitor's.
+  control::ServoSafetyConfig& f = c.safety;
+  p.readInt("safety/min_tracked_points", &f.min_tracked_points, 4, 100000,
+            "fewer points given to the law than this stops the servo (lost tracking)");
+  p.readDouble("safety/growth_factor", &f.growth_factor, 1.0, 1e6,
+               "|e| above this times its smallest value so far counts as growing, > 1");
+  if (!(f.growth_factor > 1.0))
+    throw std::invalid_argument(p.describe("safety/growth_factor") + " = 1 is out of range (1, 1e6]: |e| above this " +
+                                "times its smallest value so far counts as growing");
+  p.readInt("safety/growth_iterations", &f.growth_iterations, 1, 10000,
+            "consecutive images with a growing |e| that stop the servo");
+  readVector3(p, private_nh, "safety/workspace_min_m", &f.workspace_min_m,
+              "lower corner [x, y, z] of the workspace box of the left camera's centre in ~safety/world_frame (m)");
+  readVector3(p, private_nh, "safety/workspace_max_m", &f.workspace_max_m,
+              "upper corner [x, y, z] of the workspace box (m), above the lower corner on every axis");
+  readVector3(p, private_nh, "safety/workspace_centre_m", &f.workspace_centre_m,
+              "centre [x, y, z] of the workspace sphere (m)");
+  p.readDouble("safety/workspace_radius_m", &f.workspace_radius_m, 0.0, 1000.0,
+               "radius of the workspace sphere (m), 0 disables it");
+  const std::string safety_problems = f.validate();
+  if (!safety_problems.empty()) throw std::invalid_argument("safety parameters (~safety/...): " + safety_problems);
+  p.readString("safety/world_frame", &c.world_frame, {}, "frame of the workspace (the arm's base)");
+  p.readPositiveDouble("safety/tf_timeout_s", &c.tf_timeout_s, 10.0,
+                       "wait for the left camera's pose at an image's stamp (s)");
+
+  JointSafetyConfig& j = c.joints;
+  p.readBool("safety/check_joints", &j.enabled, "check joint_states against the joint limits");
+  readStringList(p, private_nh, "safety/joint_names", &j.names, "the checked joints' names in joint_states");
+  const int n = static_cast<int>(j.names.size());
+  readNumberList(p, private_nh, "safety/joint_min_rad", n, &j.min_rad, "lower position limit of each joint (rad)");
+  readNumberList(p, private_nh, "safety/joint_max_rad", n, &j.max_rad, "upper position limit of each joint (rad)");
+  readNumberList(p, private_nh, "safety/joint_max_velocity_rad_s", n, &j.max_velocity_rad_s,
+                 "velocity limit of each joint (rad/s)");
+  p.readDouble("safety/joint_margin_rad", &j.margin_rad, 0.0, 1.0, "stop this far inside a joint limit (rad)");
+  p.readDouble(
+      "safety/joint_lookahead_s", &j.lookahead_s, 0.0, 10.0,
+      "time a command acts before the next check (s): a joint closer to a limit + margin than its velocity limit "
+      "times this stops the servo");
+  p.readDouble("safety/joint_velocity_tolerance", &j.velocity_tolerance, 0.0, 10.0,
+               "stop above (1 + this) times a joint velocity limit");
+  p.readPositiveDouble("safety/joint_state_max_age_s", &j.max_age_s, 60.0,
+                       "a joint state older than this at an image stops the servo (s)");
+  const std::string joint_problems = j.validate();
+  if (!joint_problems.empty()) throw std::invalid_argument("safety parameters (~safety/...): " + joint_problems);
   return c;
 }
 
 ServoRos::ServoRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
-    : nh_(nh), pnh_(private_nh), config_(readServoNodeConfig(private_nh)), diagnostics_(nh, private_nh) {
+    : nh_(nh),
+      pnh_(private_nh),
+      config_(readServoNodeConfig(private_nh)),
+      diagnostics_(nh, private_nh),
+      tf_listener_(tf_buffer_),
+      monitor_(config_.safety) {
   left_image_sub_ = nh_.subscribe("left/image_raw", 2, &ServoRos::onLeftImage, this);
   left_depth_sub_ = nh_.subscribe("left/depth", 2, &ServoRos::onLeftDepth, this);
   left_info_sub_ = nh_.subscribe<sensor_msgs::CameraInfo>(
@@ -107,6 +293,14 @@ ServoRos::ServoRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   right_depth_sub_ = nh_.subscribe("right/depth", 2, &ServoRos::onRightDepth, this);
   right_info_sub_ = nh_.subscribe<sensor_msgs::CameraInfo>(
       "right/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { right_.info = m; });
+  if (config_.joints.enabled) {
+    ros::SubscribeOptions options = ros::SubscribeOptions::create<sensor_msgs::JointState>(
+        "joint_states", 5, [this](const sensor_msgs::JointStateConstPtr& m) { onJointState(m); }, ros::VoidPtr(),
+        &joint_queue_);
+    joint_state_sub_ = nh_.subscribe(options);
+    joint_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &joint_queue_);
+    joint_spinner_->start();
+  }
   velocity_pub_ = nh_.advertise<geometry_msgs::TwistStamped>("arm/camera_velocity", 2);
   status_pub_ = pnh_.advertise<std_msgs::String>("status", 1, true);
   capture_srv_ = pnh_.advertiseService("capture_reference", &ServoRos::onCaptureReference, this);
@@ -116,6 +310,16 @@ ServoRos::ServoRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   std_msgs::String idle;
   idle.data = status_text_;
   status_pub_.publish(idle);
+  const control::ServoSafetyConfig& f = config_.safety;
+  const std::string sphere =
+      f.workspace_radius_m > 0.0 ? ", sphere of " + fixed(f.workspace_radius_m) + " m" : std::string();
+  ROS_INFO(
+      "servo: safety: joints %s (margin %.3f rad, look-ahead %.2f s), workspace box [%g %g %g] .. [%g %g %g] m in "
+      "'%s'%s, at least %d points, |e| growing x%g for %d images",
+      config_.joints.enabled ? "checked" : "NOT checked", config_.joints.margin_rad, config_.joints.lookahead_s,
+      f.workspace_min_m.x(), f.workspace_min_m.y(), f.workspace_min_m.z(), f.workspace_max_m.x(), f.workspace_max_m.y(),
+      f.workspace_max_m.z(), config_.world_frame.c_str(), sphere.c_str(), f.min_tracked_points, f.growth_factor,
+      f.growth_iterations);
 }
 
 void ServoRos::onLeftImage(const sensor_msgs::ImageConstPtr& msg) {
@@ -157,6 +361,9 @@ bool ServoRos::onCaptureReference(std_srvs::Trigger::Request&, std_srvs::Trigger
   reference_stamp_ = right_.image->header.stamp;
   state_ = State::kServoing;
   iterations_ = 0;
+  monitor_.reset();
+  safety_stopped_ = false;
+  safety_reason_.clear();
   ++servoings_;
   status_text_ = "servoing";
   std_msgs::String s;
@@ -186,7 +393,8 @@ void ServoRos::stepOnLeftPair() {
   if (image.empty() || depth.empty() || depth.size() != image.size()) {
     // A corrupt image is skipped (the arm stops until a good one): the servoing goes on.
     ++corrupt_images_;
-    ROS_ERROR_THROTTLE(5.0, "servo: left camera: %s", error.empty() ? "depth map size differs from the image" : error.c_str());
+    ROS_ERROR_THROTTLE(5.0, "servo: left camera: %s",
+                       error.empty() ? "depth map size differs from the image" : error.c_str());
     publishVelocity(Eigen::Matrix<double, 6, 1>::Zero(), stamp);
     return;
   }
@@ -202,19 +410,121 @@ void ServoRos::stepOnLeftPair() {
                std::to_string(last_step_.error_norm) + ")");
         return;
       }
-      publishVelocity(control::limitTwist(last_step_.velocity, config_.max_linear_speed_mps, config_.max_angular_speed_rps),
-                      stamp);
+      {
+        // The last line before the command: nothing is sent once a check fails.
+        // A re-matching gives the law a new point set: |e| is not comparable across it, the growth history restarts.
+        if (last_step_.rematched) monitor_.reset();
+        const std::string reason = checkSafety(stamp);
+        if (!reason.empty()) {
+          safetyStop(reason);
+          return;
+        }
+      }
+      publishVelocity(
+          control::limitTwist(last_step_.velocity, config_.max_linear_speed_mps, config_.max_angular_speed_rps), stamp);
       break;
     case control::ImageStepStatus::kConverged:
       ++converged_;
       finish("converged: |e| " + std::to_string(last_step_.error_norm) + " after " + std::to_string(iterations_) +
              " images, " + std::to_string(last_step_.points) + " points");
       break;
+    case control::ImageStepStatus::kLostTracking:  // re-matching failed: a safety stop as well
+      safetyStop(control::toString(last_step_.status) + ": " + last_step_.message);
+      return;
     default:
       finish(control::toString(last_step_.status) + ": " + last_step_.message);
       break;
   }
   diagnostics_.update();
+}
+
+void ServoRos::onJointState(const sensor_msgs::JointStateConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(joint_mutex_);
+  joint_state_ = msg;
+}
+
+sensor_msgs::JointStateConstPtr ServoRos::jointStateAt(const ros::Time& image_stamp) {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.tf_timeout_s);
+  while (true) {
+    {
+      std::lock_guard<std::mutex> lock(joint_mutex_);
+      if ((joint_state_ && joint_state_->header.stamp >= image_stamp) || ros::WallTime::now() > deadline || !ros::ok())
+        return joint_state_;
+    }
+    ros::WallDuration(0.002).sleep();
+  }
+}
+
+sensor_msgs::JointStateConstPtr ServoRos::jointStateAfterLastCommand() {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.joints.max_age_s);
+  while (true) {
+    {
+      std::lock_guard<std::mutex> lock(joint_mutex_);
+      if (joint_state_->header.stamp > last_command_time_ || ros::WallTime::now() > deadline || !ros::ok())
+        return joint_state_;
+    }
+    ros::WallDuration(0.002).sleep();
+  }
+}
+
+std::string ServoRos::checkSafety(const ros::Time& stamp) {
+  control::SafetyInput in;
+  in.tracked_points = last_step_.points;
+  in.error_norm = last_step_.error_norm;
+  if (config_.joints.enabled) {
+    // The joint state of the image's tick (published with it).
+    const sensor_msgs::JointStateConstPtr joint_state = jointStateAt(stamp);
+    if (!joint_state) return "joint limit: no joint state received on " + joint_state_sub_.getTopic();
+    const double age_s = (stamp - joint_state->header.stamp).toSec();
+    if (age_s > config_.joints.max_age_s) {
+      return "joint limit: the joint state is " + fixed(age_s, 2) + " s older than the image, more than " +
+             fixed(config_.joints.max_age_s, 2) + " s (~safety/joint_state_max_age_s)";
+    }
+    sensor_msgs::JointStateConstPtr checked = joint_state;
+    bool stale = false;
+    {
+      std::lock_guard<std::mutex> lock(joint_mutex_);
+      stale = joint_state->header.stamp <= last_command_time_;
+    }
+    if (stale) {
+      // The last command may have moved the arm since this state: when that could matter (a joint within two
+      // periods' reach of its limit), wait for a state that shows it. Not always: waiting puts the loop one image
+      // behind (a velocity computed from an image that misses the previous command overshoots).
+      JointSafetyConfig two_periods = config_.joints;
+      two_periods.lookahead_s *= 2.0;
+      if (!checkJointState(two_periods, *joint_state).empty()) {
+        checked = jointStateAfterLastCommand();
+        std::lock_guard<std::mutex> lock(joint_mutex_);
+        if (checked->header.stamp <= last_command_time_)
+          return "joint limit: no joint state on " + joint_state_sub_.getTopic() + " after the last command within " +
+                 fixed(config_.joints.max_age_s, 2) + " s (~safety/joint_state_max_age_s), near a joint limit";
+      }
+    }
+    const std::string joints = checkJointState(config_.joints, *checked);
+    if (!joints.empty()) {
+      in.arm_status = sim::ArmStatus::kJointLimit;
+      in.arm_message = joints;
+    }
+  }
+  try {
+    const geometry_msgs::TransformStamped t =
+        tf_buffer_.lookupTransform(config_.world_frame, left_frame_, stamp, ros::Duration(config_.tf_timeout_s));
+    in.camera_position_m =
+        Eigen::Vector3d(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
+  } catch (const tf2::TransformException& e) {
+    return "left workspace: the left camera's pose is unknown ('" + config_.world_frame + "' -> '" + left_frame_ +
+           "' at the image's stamp: " + e.what() + ")";
+  }
+  if (monitor_.update(in) != control::SafetyStatus::kOk) return monitor_.message();
+  return "";
+}
+
+void ServoRos::safetyStop(const std::string& reason) {
+  safety_stopped_ = true;
+  safety_reason_ = reason;
+  ++safety_stops_;
+  ROS_ERROR_THROTTLE(1.0, "servo: safety stop: %s", reason.c_str());
+  finish("safety stop: " + reason);
 }
 
 void ServoRos::finish(const std::string& status) {
@@ -226,7 +536,7 @@ void ServoRos::finish(const std::string& status) {
   status_pub_.publish(s);
   if (status.rfind("converged", 0) == 0)
     ROS_INFO("servo: %s", status.c_str());
-  else
+  else if (!safety_stopped_)  // a safety stop is logged as an error by safetyStop()
     ROS_WARN("servo: %s", status.c_str());
   diagnostics_.force_update();
 }
@@ -242,12 +552,19 @@ void ServoRos::publishVelocity(const Eigen::Matrix<double, 6, 1>& twist, const r
   msg.twist.angular.y = twist[4];
   msg.twist.angular.z = twist[5];
   velocity_pub_.publish(msg);
+  std::lock_guard<std::mutex> lock(joint_mutex_);
+  last_command_time_ = ros::Time::now();
 }
 
 void ServoRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   using diagnostic_msgs::DiagnosticStatus;
   const bool failed = state_ == State::kDone && status_text_.rfind("converged", 0) != 0;
-  status.summary(failed ? DiagnosticStatus::WARN : DiagnosticStatus::OK, status_text_);
+  status.summary(safety_stopped_ ? DiagnosticStatus::ERROR
+                 : failed        ? DiagnosticStatus::WARN
+                                 : DiagnosticStatus::OK,
+                 status_text_);
+  status.add("safety stop", safety_stopped_ ? safety_reason_ : std::string("none"));
+  status.add("safety stops", safety_stops_);
   status.add("images this servoing", iterations_);
   status.add("|e|", last_step_.error_norm);
   status.add("points", last_step_.points);

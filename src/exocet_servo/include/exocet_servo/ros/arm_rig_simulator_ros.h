@@ -12,6 +12,8 @@
  *  - out `joint_states` (sensor_msgs/JointState: position rad, velocity rad/s).
  *  - out tf: ~world_frame -> ~flange_frame (each tick); ~flange_frame -> ~left_frame -> ~right_frame (static).
  *  - out `/diagnostics`: the arm's status (joint limit reached, velocity scaled, singular), the command's age.
+ * Parameter `~hide_scene` (bool, default false, read at every tick): both cameras see open water only (no object, no
+ * depth), to test the servo's stop on lost tracking.
  */
 #pragma once
 
