@@ -1,6 +1,8 @@
 // bench_stereo: every dense method on the four Middlebury v2 scenes; bad-pixel rates (> 1 px) and single-thread
-// wall time. Writes <output-dir>/stereo.json as {"method": {"scene": {"nonocc", "all", "disc", "ms"}}}.
+// wall time (--threads N for more). Writes <output-dir>/stereo.json as
+// {"method": {"scene": {"nonocc", "all", "disc", "ms"}}}.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -26,10 +28,20 @@ std::vector<std::string> splitCommas(const std::string& text) {
   return items;
 }
 
+bool hasFractionalDisparity(const cv::Mat& ground_truth_px) {
+  for (int y = 0; y < ground_truth_px.rows; ++y)
+    for (int x = 0; x < ground_truth_px.cols; ++x) {
+      const float d = ground_truth_px.at<float>(y, x);
+      if (d != std::floor(d)) return true;
+    }
+  return false;
+}
+
 int usage(const std::string& error) {
   std::cerr << "bench_stereo: " << error << "\n"
             << "usage: bench_stereo [--output-dir DIR] [--shared-data DIR] [--methods ssd,dp,...] "
-               "[--scenes tsukuba,...] [--repeat N]\n";
+               "[--scenes tsukuba,...] [--repeat N] [--threads N]\n"
+            << "  --threads: OpenCV threads (default 1: single-core timings; 0: OpenCV's default)\n";
   return 2;
 }
 
@@ -38,9 +50,10 @@ int usage(const std::string& error) {
 int main(int argc, char** argv) {
   using namespace exocet_stereo::dense;
   std::string output_dir = "out/bench", shared_data = EXOCET_SHARED_DATA_DIR;
-  std::vector<std::string> methods = {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm"};
+  std::vector<std::string> methods = {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"};
   std::vector<std::string> scenes = {"tsukuba", "venus", "teddy", "cones"};
-  int repeat = 3;  // timing: best of N runs for the fast methods (one run when a run exceeds a second)
+  int repeat = 3;   // timing: best of N runs for the fast methods (one run when a run exceeds a second)
+  int threads = 1;  // single-core timings for every method, OpenCV's SGBM included
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (i + 1 >= argc) return usage("option " + arg + " needs a value");
@@ -55,10 +68,12 @@ int main(int argc, char** argv) {
       scenes = splitCommas(value);
     else if (arg == "--repeat")
       repeat = std::max(1, std::atoi(value.c_str()));
+    else if (arg == "--threads")
+      threads = std::max(0, std::atoi(value.c_str()));
     else
       return usage("unknown option " + arg);
   }
-  cv::setNumThreads(1);  // single-core timings for every method, OpenCV's SGBM included
+  if (threads > 0) cv::setNumThreads(threads);
 
   std::ostringstream json;
   json << "{";
@@ -75,6 +90,9 @@ int main(int argc, char** argv) {
         // Integer labels: at the 1-px threshold a parabola turns many off-by-one labels into bad pixels (Tsukuba's
         // ground truth is integer); sub-pixel refinement stays available for reconstruction.
         config.subpixel = false;
+        // PatchMatch's planes are continuous: keep them where the ground truth is fractional; on Tsukuba (integer
+        // ground truth) round them, as the published PatchMatch result does (its Tsukuba map is integer).
+        if (methods[m] == "pm") config.subpixel = hasFractionalDisparity(scene.ground_truth_px);
         auto matcher = createDenseStereo(methods[m], config);
         cv::Mat disparity;
         double best_ms = 1e300, best_cpu_ms = 1e300;

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "exocet_stereo/dense/methods.h"
+#include "exocet_stereo/dense/patchmatch_stereo.h"
 #include "exocet_stereo/dense/post_processing.h"
 
 namespace exocet_stereo {
@@ -42,6 +43,14 @@ std::string DenseStereoConfig::validate() const {
   check(bd_temperature >= 0.1 && bd_temperature <= 1000.0, "bd_temperature", "[0.1, 1000]");
   check(bd_outlier_probability >= 0.0 && bd_outlier_probability <= 0.5, "bd_outlier_probability", "[0, 0.5]");
   check(bd_neighbour_weight >= 0.0 && bd_neighbour_weight <= 1.0, "bd_neighbour_weight", "[0, 1]");
+  check(pm_window_radius_px >= 1 && pm_window_radius_px <= 30, "pm_window_radius_px", "[1, 30]");
+  check(pm_window_step_px >= 1 && pm_window_step_px <= 4, "pm_window_step_px", "[1, 4]");
+  check(pm_gamma >= 0.1 && pm_gamma <= 255.0, "pm_gamma", "[0.1, 255]");
+  check(pm_alpha >= 0.0 && pm_alpha <= 1.0, "pm_alpha", "[0, 1]");
+  check(pm_tau_color >= 0.1 && pm_tau_color <= 765.0, "pm_tau_color", "[0.1, 765]");
+  check(pm_tau_gradient >= 0.1 && pm_tau_gradient <= 255.0, "pm_tau_gradient", "[0.1, 255]");
+  check(pm_iterations >= 1 && pm_iterations <= 20, "pm_iterations", "[1, 20]");
+  check(pm_min_weight >= 0.0 && pm_min_weight <= 0.1, "pm_min_weight", "[0, 0.1]");
   check(left_right_tolerance_px >= 0.0 && left_right_tolerance_px <= 10.0, "left_right_tolerance_px", "[0, 10]");
   check(fill_median_radius_px >= 0 && fill_median_radius_px <= 30, "fill_median_radius_px", "[0, 30]");
   check(fill_color_sigma > 0.0 && fill_color_sigma <= 255.0, "fill_color_sigma", "(0, 255]");
@@ -100,7 +109,7 @@ void VolumeStereo::computeRaw(const cv::Mat& left, const cv::Mat& right, cv::Mat
   if (disparity_right) *disparity_right = solve(rightViewVolume(volume), toGray(right));
 }
 
-std::vector<std::string> denseStereoMethods() { return {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm"}; }
+std::vector<std::string> denseStereoMethods() { return {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"}; }
 
 std::unique_ptr<DenseStereo> createDenseStereo(const std::string& method, const DenseStereoConfig& config) {
   if (method == "ssd") return std::make_unique<SsdStereo>(config);
@@ -110,6 +119,7 @@ std::unique_ptr<DenseStereo> createDenseStereo(const std::string& method, const 
   if (method == "gc") return std::make_unique<GraphCutStereo>(config);
   if (method == "bd") return std::make_unique<BayesianDiffusionStereo>(config);
   if (method == "sgbm") return std::make_unique<SgbmStereo>(config);
+  if (method == "pm") return std::make_unique<PatchMatchStereo>(config);
   std::string known;
   for (const auto& m : denseStereoMethods()) known += (known.empty() ? "" : ", ") + m;
   throw std::invalid_argument("unknown dense stereo method '" + method + "' (known: " + known + ")");
@@ -134,6 +144,9 @@ DenseStereoConfig defaultConfigFor(const std::string& method, int max_disparity_
     config.smoothness_truncation_px = 3;
     config.gc_cycles = 2;
     config.left_right_check = false;
+  } else if (method == "pm") {
+    config.fill_median_radius_px = 17;  // the paper's weighted median over the 35x35 window
+    config.median_radius_px = 0;        // the paper has no final median
   }
   return config;
 }

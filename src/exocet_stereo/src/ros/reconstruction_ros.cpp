@@ -15,11 +15,14 @@ namespace {
 mesh::AcquisitionReconstructionConfig readConfig(const ros::NodeHandle& pnh) {
   mesh::AcquisitionReconstructionConfig c;
   const exocet_mosaic::ParameterReader p(pnh);
-  p.readString("method", &c.depth.method, {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm"}, "dense stereo method");
+  p.readString("method", &c.depth.method, {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"},
+               "dense stereo method");
   p.readPositiveDouble("min_depth_m", &c.depth.min_depth_m, 1e4, "nearest depth searched (m)");
   p.readPositiveDouble("max_depth_m", &c.depth.max_depth_m, 1e4, "farthest depth searched (m), above min_depth_m");
   p.readPositiveDouble("voxel_m", &c.fusion.voxel_m, 1e3, "voxel of the fused cloud and cell of its surface (m)");
   p.readInt("min_confirmations", &c.fusion.min_confirmations, 0, 64, "other views that must confirm a point");
+  p.readBool("texture", &c.texture, "texture the surface from the pairs' left images");
+  p.readDouble("atlas_scale", &c.texturing.atlas_scale, 1e-3, 1.0, "scale of the images in the texture atlas");
   const std::string problems = c.validate();
   if (!problems.empty()) throw std::invalid_argument("parameters: " + problems);
   return c;

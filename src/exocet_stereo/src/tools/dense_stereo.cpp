@@ -12,7 +12,7 @@ namespace {
 
 int usage(const std::string& error) {
   if (!error.empty()) std::cerr << "dense_stereo: " << error << "\n";
-  std::cerr << "usage: dense_stereo --method ssd|dp|so|sgm|gc|bd|sgbm --left L.png --right R.png --max-disparity N\n"
+  std::cerr << "usage: dense_stereo --method ssd|dp|so|sgm|gc|bd|sgbm|pm --left L.png --right R.png --max-disparity N\n"
                "                    --output D.pfm [--png vis.png]\n"
                "  L/R: rectified 8-bit images (grey or colour) of the same size; N in [1, 512] and < width - 1.\n"
                "  D.pfm: left disparity (x_right = x_left - d), inf where unknown; vis.png: d * 255 / N, 0 unknown.\n";

@@ -1,8 +1,9 @@
 // reconstruct_acquisition: the offline reconstruction of an acquisition (2D4 report, section 3, carried on to every
 // pair and a dense surface). Reads the bag written by exocet_servo's acquisition_sequencer_node, turns each stereo
 // pair into a depth map (rectification, dense stereo over a depth range), fuses the depth maps of all pairs into one
-// cloud, builds its surface and writes fused_cloud.ply, surface.ply, surface.obj and surface.wrl into the output
-// folder. Progress on stdout. The node reconstruction_node does the same and shows the result in rviz.
+// cloud, builds its surface, textures it from the left images and writes fused_cloud.ply, surface.ply, surface.obj
+// and surface.wrl (with their texture atlas surface.png) into the output folder. Progress on stdout. The node
+// reconstruction_node does the same and shows the result in rviz.
 #include <chrono>
 #include <iostream>
 #include <string>
@@ -16,7 +17,10 @@ namespace {
 int usage(const std::string& error) {
   if (!error.empty()) std::cerr << "reconstruct_acquisition: " << error << "\n";
   std::cerr << "usage: reconstruct_acquisition --bag ACQUISITION.bag --output-dir DIR [--method sgm] "
-               "[--min-depth-m 0.4] [--max-depth-m 1.0] [--voxel-m 0.002] [--min-confirmations 1]\n"
+               "[--min-depth-m 0.4] [--max-depth-m 1.0] [--voxel-m 0.002] [--min-confirmations 1] [--texture 1] "
+               "[--atlas-scale 1.0]\n"
+               "  --texture 0 keeps the surface untextured (vertex colours only); --atlas-scale (0, 1] downscales the "
+               "left images in the texture atlas.\n"
                "  The bag: exocet_servo's acquisition_sequencer_node (left|right/image_raw, camera_info, pose per "
                "stop).\n";
   return error.empty() ? 0 : 2;
@@ -41,6 +45,9 @@ int main(int argc, char** argv) {
       else if (arg == "--max-depth-m") config.depth.max_depth_m = std::stod(value);
       else if (arg == "--voxel-m") config.fusion.voxel_m = std::stod(value);
       else if (arg == "--min-confirmations") config.fusion.min_confirmations = std::stoi(value);
+      else if (arg == "--texture" && (value == "0" || value == "1")) config.texture = value == "1";
+      else if (arg == "--texture") return usage("--texture must be 0 or 1");
+      else if (arg == "--atlas-scale") config.texturing.atlas_scale = std::stod(value);
       else return usage("unknown option " + arg);
     }
   } catch (const std::exception&) {
@@ -72,6 +79,12 @@ int main(int argc, char** argv) {
     for (const std::string& w : result.warnings) std::cerr << "reconstruct_acquisition: " << w << "\n";
     std::cout << "  fused cloud " << result.cloud.size() << " points; surface " << result.surface.vertices.size()
               << " vertices, " << result.surface.triangles.size() << " triangles\n";
+    if (result.surface.hasTexture()) {
+      std::cout << "  texture: " << result.texturing.textured_triangles << " triangles from "
+                << result.texturing.views_used << " views, " << result.texturing.untextured_triangles
+                << " seen by none; atlas " << result.texturing.atlas_width_px << "x"
+                << result.texturing.atlas_height_px << " px, " << result.texturing.seam_edges << " seam edges\n";
+    }
     const std::vector<std::string> files = mesh::writeReconstruction(result, output_dir);
     std::cout << "reconstruct_acquisition: wrote";
     for (const std::string& f : files) std::cout << " " << f;

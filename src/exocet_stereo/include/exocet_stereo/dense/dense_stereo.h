@@ -2,7 +2,8 @@
  * @file dense_stereo.h
  * @brief Dense stereo correspondence on rectified pairs: the five methods of Scharstein & Szeliski's taxonomy
  *        (shiftable-window SSD, dynamic programming, scanline optimisation, graph cuts, Bayesian diffusion), an
- *        SGM-style multi-direction variant of scanline optimisation and OpenCV's StereoSGBM as a baseline.
+ *        SGM-style multi-direction variant of scanline optimisation, OpenCV's StereoSGBM as a baseline and PatchMatch
+ *        Stereo with slanted support windows ("pm", patchmatch_stereo.h).
  *
  * Every method returns a CV_32F disparity map of the LEFT image (x_right = x_left - d), NaN where unknown, and shares
  * the same optional post-processing (left-right consistency check, hole filling, median filter), so comparisons are
@@ -59,7 +60,18 @@ struct DenseStereoConfig {
   double bd_outlier_probability = 0.02;  ///< robust prior: mass spread uniformly over all disparities, [0, 0.5]
   double bd_neighbour_weight = 0.25;     ///< weight of each of the 4 neighbours' messages, [0, 1]
 
-  // --- Post-processing (applied identically for every method) ---
+  // --- PatchMatch Stereo with slanted windows (method "pm", Bleyer, Rhemann & Rother, BMVC 2011) ---
+  int pm_window_radius_px = 17;  ///< adaptive-weight support window (2r+1)^2 (35x35 in the paper), [1, 30]
+  int pm_window_step_px = 1;     ///< use every n-th window row and column (2: ~4x faster, coarser), [1, 4]
+  double pm_gamma = 10.0;        ///< support weight exp(-|I_p - I_q|_1 / gamma), L1 over 3 channels, [0.1, 255]
+  double pm_alpha = 0.9;         ///< cost = (1 - alpha) min(colour, tau_col) + alpha min(gradient, tau_grad), [0, 1]
+  double pm_tau_color = 10.0;    ///< truncation of the L1 colour difference (grey levels summed over 3 ch.), [0.1, 765]
+  double pm_tau_gradient = 2.0;  ///< truncation of the L1 x/y gradient difference (grey levels / px), [0.1, 255]
+  int pm_iterations = 3;         ///< propagation iterations, each over both views, [1, 20]
+  double pm_min_weight = 1e-4;   ///< window pixels of smaller support weight are skipped (0: exact), [0, 0.1]
+  int pm_seed = 1;               ///< random initialisation and refinement draws (results do not depend on threads)
+
+  // --- Post-processing (applied identically for every method; "pm" fills holes from planes, see its header) ---
   bool subpixel = true;                  ///< parabola fit on the method's final cost around the winner
   bool left_right_check = true;          ///< invalidate pixels whose right-view disparity disagrees
   double left_right_tolerance_px = 1.0;  ///< allowed |d_left - d_right|, [0, 10]
@@ -84,7 +96,8 @@ class DenseStereo {
   virtual ~DenseStereo() = default;
 
   /// Left disparity after the configured post-processing. @throws std::invalid_argument on bad images.
-  cv::Mat compute(const cv::Mat& left, const cv::Mat& right) const;
+  /// Virtual so that a method whose post-processing needs more than disparities (planes of "pm") can replace it.
+  virtual cv::Mat compute(const cv::Mat& left, const cv::Mat& right) const;
 
   /// Method name as accepted by create().
   virtual std::string name() const = 0;
@@ -106,7 +119,7 @@ class DenseStereo {
   DenseStereoConfig config_;
 };
 
-/// Methods create() knows: ssd, dp, so, sgm, gc, bd, sgbm.
+/// Methods create() knows: ssd, dp, so, sgm, gc, bd, sgbm, pm.
 std::vector<std::string> denseStereoMethods();
 
 /**
@@ -122,7 +135,9 @@ std::unique_ptr<DenseStereo> createDenseStereo(const std::string& method,
  *        15x15 window and no weighted-median fill (real-time budget); sgm uses penalties 12 / 50 and colour weight
  *        0.4; dp and bd aggregate the cost over 3x3; gc uses a 7x7 census at full weight, truncated-linear smoothness
  *        (T = 3, penalty_large 80), two expansion cycles and no left-right check (its occlusion handling is better
- *        without: 1.9 % versus 3.4 % nonocc on Tsukuba, and it halves the run time).
+ *        without: 1.9 % versus 3.4 % nonocc on Tsukuba, and it halves the run time); pm keeps the paper's settings
+ *        (pm_* defaults) with the paper's weighted median of the filled pixels over 35x35 (fill_median_radius_px 17)
+ *        and no final median.
  */
 DenseStereoConfig defaultConfigFor(const std::string& method, int max_disparity_px);
 

@@ -1,8 +1,9 @@
 /**
  * @file acquisition_reconstruction.h
  * @brief The offline reconstruction of an acquisition: every calibrated stereo pair to a depth map (pair_depth.h),
- * the depth maps fused into one cloud (cloud_fusion.h), its surface (cloud_surface.h), and the files (fused cloud
- * PLY; surface PLY, OBJ, VRML). Shared by the command-line tool and the node. No ROS.
+ * the depth maps fused into one cloud (cloud_fusion.h), its surface (cloud_surface.h) textured from the pairs' left
+ * images (surface_texturing.h), and the files (fused cloud PLY; surface PLY, OBJ, VRML and their texture atlas PNG).
+ * Shared by the command-line tool and the node. No ROS.
  */
 #pragma once
 
@@ -13,6 +14,7 @@
 #include "exocet_stereo/mesh/cloud_fusion.h"
 #include "exocet_stereo/mesh/cloud_surface.h"
 #include "exocet_stereo/mesh/pair_depth.h"
+#include "exocet_stereo/mesh/surface_texturing.h"
 #include "exocet_stereo/mesh/textured_mesh.h"
 
 namespace exocet_stereo {
@@ -33,6 +35,9 @@ struct AcquisitionReconstructionConfig {
     c.min_confirmations = 1;
     return c;
   }();
+  /// Texture the surface from the left images of the pairs that gave a depth map (off: geometry and vertex colours).
+  bool texture = true;
+  SurfaceTexturingConfig texturing;
   /// The surface's grid follows the fusion's voxel: cell = voxel, reach = 3 voxels.
   std::string validate() const;
 };
@@ -41,7 +46,8 @@ struct AcquisitionReconstructionConfig {
 struct AcquisitionReconstruction {
   std::vector<DepthView> views;       ///< one per pair that gave a depth map
   FusedCloud cloud;
-  TexturedMesh surface;               ///< empty when the cloud was too sparse for one
+  TexturedMesh surface;               ///< empty when the cloud was too sparse for one; textured if config.texture
+  SurfaceTexturingStats texturing;    ///< zeros when not textured
   std::vector<std::string> warnings;  ///< pairs left out, and why
 };
 
@@ -57,8 +63,9 @@ AcquisitionReconstruction reconstructPairs(const std::vector<CalibratedPair>& pa
                                            const AcquisitionReconstructionConfig& config,
                                            const ReconstructionProgress& progress = nullptr);
 
-/// Writes fused_cloud.ply and, with a surface, surface.ply, surface.obj and surface.wrl into `dir` (created).
-/// @return the files written. @throws std::runtime_error when a file cannot be written.
+/// Writes fused_cloud.ply and, with a surface, surface.ply, surface.obj (+ surface.mtl) and surface.wrl into `dir`
+/// (created), and surface.png, their texture atlas, when the surface is textured.
+/// @return the files written (not the MTL). @throws std::runtime_error when a file cannot be written.
 std::vector<std::string> writeReconstruction(const AcquisitionReconstruction& result, const std::string& dir);
 
 }  // namespace mesh

@@ -1,0 +1,70 @@
+/**
+ * @file patchmatch_stereo.h
+ * @brief "pm": PatchMatch Stereo with slanted support windows (Bleyer, Rhemann & Rother, BMVC 2011).
+ *
+ * Every pixel of both views carries a disparity plane d = a x + b y + c. Its cost is the adaptive-support-weight sum
+ * over a (2r+1)^2 window of (1 - alpha) min(|I_q - I'_q'|_1, tau_col) + alpha min(|grad_q - grad'_q'|_1, tau_grad),
+ * weights exp(-|I_p - I_q|_1 / gamma), q' = q shifted by the plane's disparity at q and sampled with linear
+ * interpolation (so slanted surfaces are matched without fronto-parallel bias). Planes start random (random disparity,
+ * random unit normal) and improve by spatial propagation (left/upper neighbours, then right/lower on the next
+ * iteration), view propagation (each plane is offered, converted, to the pixel it matches in the other view) and
+ * refinement (random perturbations of disparity and normal with ranges halved until the disparity range is < 0.1 px).
+ *
+ * Differences from the paper, on purpose: view propagation pushes each view's planes to the other view once before
+ * that view's pass (not per pixel inside the pass); window pixels with weight below pm_min_weight are skipped; a
+ * candidate's window sum stops as soon as it reaches the pixel's best cost. The scan itself is the paper's sequential
+ * one, run as anti-diagonal wavefronts: a pixel only reads its two already-visited neighbours, so all pixels of one
+ * anti-diagonal are independent and the result equals the raster scan's exactly, for any number of threads
+ * (random draws are a hash of seed, view, iteration and pixel).
+ *
+ * Post-processing (compute()): left-right check, then each invalid pixel takes the lower of the planes of its nearest
+ * valid left and right neighbours evaluated at the pixel, then a colour-weighted median over the filled pixels, as in
+ * the paper; the shared flags (left_right_check, fill_holes, fill_median_radius_px, median_radius_px) switch the steps.
+ * Disparities are continuous by nature; with subpixel = false compute() rounds them to integers (integer ground truth).
+ */
+#pragma once
+
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "exocet_stereo/dense/dense_stereo.h"
+
+namespace exocet_stereo {
+namespace dense {
+
+/// Per-pixel planes of both views: CV_32FC3 (a, b, c), disparity d = a x + b y + c in that view's pixel coordinates.
+struct PlaneMaps {
+  cv::Mat left;   ///< left view: x_right = x_left - d
+  cv::Mat right;  ///< right view: x_left = x_right + d
+};
+
+/// Disparity map (CV_32F) of a plane map (CV_32FC3).
+cv::Mat planeDisparity(const cv::Mat& planes);
+
+/**
+ * @brief Fill NaN pixels of `disparity` row-wise with the lower of the planes of the nearest valid pixels to the left
+ *        and to the right, evaluated at the pixel and clamped to [0, max_disparity_px]; rows with no valid pixel are
+ *        then filled column-wise by fillHoles().
+ */
+cv::Mat fillHolesFromPlanes(const cv::Mat& disparity, const cv::Mat& planes, double max_disparity_px);
+
+/// PatchMatch Stereo; reads the pm_* fields and max_disparity_px of the config (see the file comment).
+class PatchMatchStereo : public DenseStereo {
+ public:
+  using DenseStereo::DenseStereo;
+  std::string name() const override { return "pm"; }
+
+  /// Left disparity after the paper's post-processing (plane-based hole filling). @throws std::invalid_argument.
+  cv::Mat compute(const cv::Mat& left, const cv::Mat& right) const override;
+
+  /// Optimised planes of both views, before any post-processing. @throws std::invalid_argument on bad images.
+  PlaneMaps computePlanes(const cv::Mat& left, const cv::Mat& right) const;
+
+ protected:
+  void computeRaw(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity_left,
+                  cv::Mat* disparity_right) const override;
+};
+
+}  // namespace dense
+}  // namespace exocet_stereo
