@@ -1,7 +1,9 @@
 // Benchmark of the image-level intrinsics-free servo (2D4 report 2.3-2.4): a rendered, textured vent on a seabed; the
 // right camera takes the reference image, the left camera (other intrinsics) starts 5-10 cm and 5-10 deg away and
 // servoes with SIFT matching, KLT tracking, rendered depths and the invariant law. Then the control rate on 640x480
-// images, one core (cv::setNumThreads(1)): tracking + invariant features + law. Writes servo_image.json.
+// images, one core (cv::setNumThreads(1)): tracking + invariant features + law; the report's circular acquisition
+// through the arm (3 servoings) and free-flying (20 servoings = a full circle about the vent's axis, after a check
+// that the renderer shows the vent from all sides). Writes servo_image.json.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -52,6 +54,46 @@ std::vector<Eigen::Isometry3d> startPoses(const Eigen::Isometry3d& reference, in
     out.push_back(reference * trajectory::expSe3(d));
   }
   return out;
+}
+
+/// Rotation of angle_rad about the world vertical through `centre_w` (the vent's axis), as a world transform.
+Eigen::Isometry3d aboutVertical(const Eigen::Vector3d& centre_w, double angle_rad) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(angle_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = centre_w - t.linear() * centre_w;
+  return t;
+}
+
+/// What one view of the vent shows, sampled on a grid of pixels (every `step_px`): the fraction of samples on the
+/// chimney (side and top), on the seabed and on the water, and the chimney's texture contrast (mean gradient magnitude
+/// of the rendered image on chimney samples, gray levels per pixel).
+struct ViewContent {
+  double chimney_fraction = 0.0, seabed_fraction = 0.0, water_fraction = 0.0, chimney_gradient = 0.0;
+};
+
+ViewContent viewContent(const sim::VentRenderer& renderer, const sim::PinholeCamera& camera,
+                        const Eigen::Isometry3d& world_T_camera, const cv::Mat& image, int step_px = 8) {
+  ViewContent c;
+  int n = 0, chimney = 0, seabed = 0;
+  double gradient_sum = 0.0;
+  for (int v = step_px / 2; v < camera.height_px - 1; v += step_px) {
+    for (int u = step_px / 2; u < camera.width_px - 1; u += step_px) {
+      sim::SurfaceKind kind = sim::SurfaceKind::kNone;
+      renderer.depthAt(camera, world_T_camera, Eigen::Vector2d(u, v), &kind);
+      ++n;
+      if (kind == sim::SurfaceKind::kSeabed) ++seabed;
+      if (kind != sim::SurfaceKind::kChimney && kind != sim::SurfaceKind::kTop) continue;
+      ++chimney;
+      const double gx = image.at<uchar>(v, u + 1) - image.at<uchar>(v, u - 1);
+      const double gy = image.at<uchar>(v + 1, u) - image.at<uchar>(v - 1, u);
+      gradient_sum += 0.5 * std::hypot(gx, gy);
+    }
+  }
+  c.chimney_fraction = static_cast<double>(chimney) / n;
+  c.seabed_fraction = static_cast<double>(seabed) / n;
+  c.water_fraction = 1.0 - c.chimney_fraction - c.seabed_fraction;
+  c.chimney_gradient = chimney > 0 ? gradient_sum / chimney : 0.0;
+  return c;
 }
 
 }  // namespace
@@ -216,6 +258,104 @@ int main(int argc, char** argv) {
   printf("%s, %d images in all\n", circle_status.c_str(), circle_images);
   const double circle_drift_end_mm = circle_drift_mm.empty() ? NAN : circle_drift_mm.back();
 
+  // ---- Free-flying rig circle at image level (no arm): the left camera's pose is integrated directly ----
+  // The rig transform is chosen with its screw axis on the vent's vertical axis: the right camera is the left one
+  // rotated by 18 deg about that axis, at the horizontal radius that makes the baseline 0.3 m. Servoing k brings the
+  // left camera from where servoing k - 1 ended to where the right camera was then (the reference image, K_r), so
+  // 20 servoings close the circle; the drift is how far the simulated poses end from left_0 (left_T_right)^k.
+  const int free_circle_servoings = 20;
+  const double pan_rad = 18.0 * M_PI / 180.0, baseline_m = 0.3;
+  const Eigen::Vector3d vent_base_w = renderer.config().base_m;
+  const double circle_radius_m = 0.5 * baseline_m / std::sin(0.5 * pan_rad);  // chord of 18 deg = baseline
+  const Eigen::Isometry3d free_left_0 =
+      sim::lookAt(vent_base_w + Eigen::Vector3d(circle_radius_m, 0.0, 0.55), vent_base_w + Eigen::Vector3d(0, 0, 0.12));
+  const Eigen::Isometry3d pan_w = aboutVertical(vent_base_w, pan_rad);
+  const Eigen::Isometry3d left_T_right = free_left_0.inverse() * pan_w * free_left_0;
+  printf(
+      "\n== Free-flying rig circle (image level, no arm): left_T_right baseline %.4f m, pan %.3f deg, screw axis "
+      "on the vent's axis (radius %.4f m), %d servoings\n",
+      left_T_right.translation().norm(), Eigen::AngleAxisd(left_T_right.linear()).angle() * 180.0 / M_PI,
+      circle_radius_m, free_circle_servoings);
+
+  // Renderer check first: the right camera's views all round the circle must show the textured vent, not hidden by
+  // the seabed (the chimney's texture has a seam at azimuth pi; the light makes one side darker).
+  double min_chimney_fraction = 1.0, min_chimney_gradient = 1e9, max_chimney_gradient = 0.0;
+  int first_bad_view = -1;
+  {
+    const auto t_check = Clock::now();
+    printf("%5s %10s %9s %9s %9s %10s\n", "view", "azimuth", "chimney", "seabed", "water", "chim grad");
+    for (int k = 0; k < free_circle_servoings; ++k) {
+      Eigen::Isometry3d pose = free_left_0;
+      for (int j = 0; j <= k; ++j) pose = pose * left_T_right;
+      const sim::RenderedView view = renderer.render(setup.reference_camera, pose);
+      const ViewContent c = viewContent(renderer, setup.reference_camera, pose, view.image);
+      const Eigen::Vector3d p = pose.translation() - vent_base_w;
+      printf("%5d %8.1fdeg %8.1f%% %8.1f%% %8.1f%% %10.2f\n", k + 1, std::atan2(p.y(), p.x()) * 180.0 / M_PI,
+             100.0 * c.chimney_fraction, 100.0 * c.seabed_fraction, 100.0 * c.water_fraction, c.chimney_gradient);
+      min_chimney_fraction = std::min(min_chimney_fraction, c.chimney_fraction);
+      min_chimney_gradient = std::min(min_chimney_gradient, c.chimney_gradient);
+      max_chimney_gradient = std::max(max_chimney_gradient, c.chimney_gradient);
+      // A view is unusable when the vent is (almost) absent or untextured.
+      if (first_bad_view < 0 && (c.chimney_fraction < 0.02 || c.chimney_gradient < 1.0)) first_bad_view = k + 1;
+    }
+    printf("renderer check: vent on >= %.1f%% of every view, chimney gradient %.2f..%.2f gray/px, %s (%.1f s)\n",
+           100.0 * min_chimney_fraction, min_chimney_gradient, max_chimney_gradient,
+           first_bad_view < 0 ? "all sides textured and visible"
+                              : ("view " + std::to_string(first_bad_view) + " degenerate").c_str(),
+           std::chrono::duration<double>(Clock::now() - t_check).count());
+  }
+
+  std::vector<double> free_drift_mm, free_drift_deg, free_step_mm, free_step_deg;
+  std::vector<int> free_images_per;
+  std::vector<std::string> free_status_per;
+  int free_images = 0;
+  std::string free_status = "converged";
+  double free_drift_max_mm = 0.0, free_closure_mm = NAN, free_closure_deg = NAN;
+  const auto t_circle = Clock::now();
+  {
+    sim::ImageServoSetup cs = setup;  // same cameras (left K_l servoed, right K_r takes the references)
+    Eigen::Isometry3d left_k = free_left_0, predicted = free_left_0;
+    printf("%5s %14s %18s %18s %7s %7s %s\n", "servo", "initial", "to its target", "drift (circle)", "images", "remat",
+           "status");
+    for (int k = 0; k < free_circle_servoings; ++k) {
+      cs.world_T_start = left_k;
+      cs.world_T_reference = left_k * left_T_right;
+      predicted = predicted * left_T_right;
+      const sim::ImageServoResult r = sim::runImageServo(renderer, cs, config);
+      free_images += r.iterations;
+      left_k = r.final_pose;
+      const sim::PoseError drift = sim::poseError(left_k, predicted);
+      free_drift_mm.push_back(drift.position_mm);
+      free_drift_deg.push_back(drift.rotation_deg);
+      free_step_mm.push_back(r.final_error.position_mm);
+      free_step_deg.push_back(r.final_error.rotation_deg);
+      free_images_per.push_back(r.iterations);
+      free_status_per.push_back(sim::toString(r.status));
+      free_drift_max_mm = std::max(free_drift_max_mm, drift.position_mm);
+      printf("%5d %6.1fmm %5.1fd %9.3fmm %6.4fd %9.3fmm %6.4fd %7d %7d %s%s\n", k + 1, r.initial_error.position_mm,
+             r.initial_error.rotation_deg, r.final_error.position_mm, r.final_error.rotation_deg, drift.position_mm,
+             drift.rotation_deg, r.iterations, r.rematches, sim::toString(r.status).c_str(),
+             r.status == sim::ImageServoStatus::kConverged ? "" : (" (" + r.message + ")").c_str());
+      if (r.status != sim::ImageServoStatus::kConverged) {
+        free_status = sim::toString(r.status) + " at servoing " + std::to_string(k + 1) + " of " +
+                      std::to_string(free_circle_servoings) + ": " + r.message;
+        break;
+      }
+    }
+    if (free_drift_mm.size() == static_cast<size_t>(free_circle_servoings)) {
+      const sim::PoseError closure = sim::poseError(left_k, free_left_0);
+      free_closure_mm = closure.position_mm;
+      free_closure_deg = closure.rotation_deg;
+    }
+  }
+  const double free_circle_s = std::chrono::duration<double>(Clock::now() - t_circle).count();
+  printf(
+      "%s after %zu servoings (%.0f deg round), %d images; drift end %.3f mm %.4f deg (max %.3f mm); closure "
+      "%.3f mm %.4f deg; %.1f s\n",
+      free_status.c_str(), free_drift_mm.size(), 18.0 * free_drift_mm.size(), free_images,
+      free_drift_mm.empty() ? NAN : free_drift_mm.back(), free_drift_deg.empty() ? NAN : free_drift_deg.back(),
+      free_drift_max_mm, free_closure_mm, free_closure_deg, free_circle_s);
+
   const std::string path = output_dir + "/servo_image.json";
   std::ofstream out(path);
   if (!out) {
@@ -248,6 +388,25 @@ int main(int argc, char** argv) {
       << "  \"arm_circle_images\": " << circle_images << ",\n"
       << "  \"arm_circle_drift_end_mm\": " << num(circle_drift_end_mm) << ",\n"
       << "  \"arm_circle_drift_end_deg\": " << num(circle_drift_deg.empty() ? NAN : circle_drift_deg.back()) << ",\n"
+      << "  \"circle_servoings\": " << free_drift_mm.size() << ",\n"
+      << "  \"circle_drift_end_mm\": " << num(free_drift_mm.empty() ? NAN : free_drift_mm.back()) << ",\n"
+      << "  \"circle_drift_end_deg\": " << num(free_drift_deg.empty() ? NAN : free_drift_deg.back()) << ",\n"
+      << "  \"circle_drift_max_mm\": " << num(free_drift_max_mm) << ",\n"
+      << "  \"circle_closure_mm\": " << num(free_closure_mm) << ",\n"
+      << "  \"circle_closure_deg\": " << num(free_closure_deg) << ",\n"
+      << "  \"circle_images\": " << free_images << ",\n"
+      << "  \"circle_status\": \"" << free_status << "\",\n"
+      << "  \"circle_seconds\": " << num(free_circle_s) << ",\n"
+      << "  \"circle_renderer_min_chimney_fraction\": " << num(min_chimney_fraction) << ",\n"
+      << "  \"circle_renderer_min_chimney_gradient\": " << num(min_chimney_gradient) << ",\n"
+      << "  \"circle_per_servoing\": [\n";
+  for (size_t k = 0; k < free_drift_mm.size(); ++k) {
+    out << "    {\"servoing\": " << k + 1 << ", \"drift_mm\": " << num(free_drift_mm[k])
+        << ", \"drift_deg\": " << num(free_drift_deg[k]) << ", \"final_pos_err_mm\": " << num(free_step_mm[k])
+        << ", \"final_rot_err_deg\": " << num(free_step_deg[k]) << ", \"images\": " << free_images_per[k]
+        << ", \"status\": \"" << free_status_per[k] << "\"}" << (k + 1 < free_drift_mm.size() ? "," : "") << "\n";
+  }
+  out << "  ],\n"
       << "  \"starts\": [\n";
   for (size_t s = 0; s < results.size(); ++s) {
     const auto& r = results[s];
