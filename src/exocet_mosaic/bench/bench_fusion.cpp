@@ -486,6 +486,8 @@ struct Sources {
   std::vector<NavEvent> events;
   std::map<double, Eigen::Vector2d> dr_at;  ///< DR camera centre by stamp
   std::vector<double> usbl_errors;          ///< fixes at frame stamps, against the truth (m)
+  double metric_step_along_sq_m2 = 0.0, metric_step_cross_sq_m2 = 0.0;  ///< sums of squared step errors per axis
+  int metric_step_axis_count = 0;
   int usbl_outliers = 0;                    ///< fixes off by more than 4 sigma
 };
 
@@ -522,7 +524,15 @@ Sources buildSources(const CapturedDive& d, const std::vector<registration::Moti
       std::cout << "  metric conversion of pair " << k << " failed: " << motions[k].error << "\n";
       continue;
     }
-    metric_error_sum += (motions[k].camera_displacement_en_m - (truth[k] - truth[k - 1])).squaredNorm();
+    const Eigen::Vector2d true_step = truth[k] - truth[k - 1];
+    const Eigen::Vector2d step_error = motions[k].camera_displacement_en_m - true_step;
+    metric_error_sum += step_error.squaredNorm();
+    if (true_step.norm() > 1e-6) {  // along and across the step's motion: is the registration's error isotropic?
+      const Eigen::Vector2d along = true_step.normalized();
+      src.metric_step_along_sq_m2 += std::pow(along.dot(step_error), 2);
+      src.metric_step_cross_sq_m2 += std::pow(along.x() * step_error.y() - along.y() * step_error.x(), 2);
+      ++src.metric_step_axis_count;
+    }
     src.metric_step_reported_rms_m += motions[k].covariance_m2.trace();
     ++metric_count;
   }
@@ -712,7 +722,11 @@ int main(int argc, char** argv) {
   const int usbl_outliers = sources.usbl_outliers;
   std::cout << "metric motion: per-pair displacement RMSE " << 1000.0 * sources.metric_step_rmse_m << " mm over "
             << sources.metric_count << " pairs (their covariances say " << 1000.0 * sources.metric_step_reported_rms_m
-            << " mm)\n";
+            << " mm); per axis, along the motion "
+            << 1000.0 * std::sqrt(sources.metric_step_along_sq_m2 / std::max(1, sources.metric_step_axis_count))
+            << " mm, across it "
+            << 1000.0 * std::sqrt(sources.metric_step_cross_sq_m2 / std::max(1, sources.metric_step_axis_count))
+            << " mm\n";
 
   // ---- 5. Single sources ----
   // Image motion alone from the true first position (a failed pair keeps the previous pair's motion).
