@@ -123,10 +123,12 @@ inline SyntheticDive makeSyntheticDive(const SyntheticDiveConfig& config) {
       const double tp = config.t0_s + (k - 1) / config.fps;
       const Eigen::Vector2d delta = truth(t) - truth(tp);
       const Eigen::Matrix2d image_cov =
-          (std::pow(config.image_sigma_m, 2) + std::pow(m.image_step_noise_m, 2) + m.position_noise_m2_per_s * dt) *
-          Eigen::Matrix2d::Identity();
-      // Measured motion: rotated by the heading error, scaled by the pixel-size error, plus noise.
-      const Eigen::Vector2d measured = rot2(psi) * delta / (1.0 + c) + gauss2(std::sqrt(image_cov(0, 0)));
+          (std::pow(config.image_sigma_m, 2) + m.position_noise_m2_per_s * dt) * Eigen::Matrix2d::Identity() +
+          m.imageStepNoiseCovariance(delta);
+      // Measured motion: rotated by the heading error, scaled by the pixel-size error, plus noise (anisotropic when
+      // the model's step noise is).
+      const Eigen::Matrix2d image_cov_sqrt = image_cov.llt().matrixL();
+      const Eigen::Vector2d measured = rot2(psi) * delta / (1.0 + c) + image_cov_sqrt * gauss2(1.0);
       // Dead-reckoning offset: the shared heading error, plus its random walk.
       if (config.dr_shares_heading) d += (rot2(psi) - Eigen::Matrix2d::Identity()) * delta;
       d += dr_scale * delta;  // the DR's velocity scale error
@@ -286,7 +288,7 @@ inline std::vector<Eigen::Vector4d> batchLeastSquares(const FilterConfig& config
     if (e.kind == NavEvent::kImage) {
       const double dt = e.stamp_s - e.previous_stamp_s;
       const Eigen::Matrix2d Qp =
-          e.covariance + (config.position_noise_m2_per_s * dt + std::pow(config.image_step_noise_m, 2)) * I;
+          e.covariance + config.position_noise_m2_per_s * dt * I + config.imageStepNoiseCovariance(e.value);
       add({{k * dim, I}, {(k - 1) * dim, -I}}, e.value, Qp.inverse());
       if (with_dr) {
         const double q = config.dr_offset_noise_m2_per_m * e.value.norm() + config.dr_offset_noise_m2_per_s * dt;

@@ -69,7 +69,7 @@ TEST(NavigationFilter, HandComputedKalmanStep) {
   const Eigen::Matrix2d I = Eigen::Matrix2d::Identity();
   const Eigen::Vector2d x_prior = p0 + m;
   const Eigen::Matrix2d P_prior =
-      P0 + motion.covariance_m2 + (config.position_noise_m2_per_s * 0.2 + std::pow(config.image_step_noise_m, 2)) * I;
+      P0 + motion.covariance_m2 + config.position_noise_m2_per_s * 0.2 * I + config.imageStepNoiseCovariance(m);
   EXPECT_LT((filter.current().position_en_m - x_prior).norm(), 1e-12);
   EXPECT_LT((filter.current().position_covariance_m2 - P_prior).norm(), 1e-12);
   EXPECT_DOUBLE_EQ(filter.current().stamp_s, 10.2);
@@ -88,6 +88,39 @@ TEST(NavigationFilter, HandComputedKalmanStep) {
   EXPECT_NEAR(r.mahalanobis_sq, (z - x_prior).dot(S.inverse() * (z - x_prior)), 1e-12);
   EXPECT_EQ(filter.current().x.size(), kStateSize);
   EXPECT_EQ(filter.log().steps.size(), 2u);
+}
+
+TEST(NavigationFilter, ImageStepNoiseIsAlongAndAcrossTheMotion) {
+  FilterConfig config = linearConfig();
+  config.image_step_noise_along_m = 0.002;
+  config.image_step_noise_across_m = -1e-3;
+  EXPECT_NE(config.validate().find("image_step_noise_across_m"), std::string::npos) << config.validate();
+  config.image_step_noise_across_m = 0.0005;
+  ASSERT_EQ(config.validate(), "");
+  // A step towards the north-east: its extra variance is 4e-6 m^2 along (1, 1)/sqrt(2), 2.5e-7 m^2 across it.
+  const Eigen::Vector2d m(0.03, 0.03);
+  const Eigen::Vector2d along = m.normalized(), across(-along.y(), along.x());
+  const Eigen::Matrix2d S = config.imageStepNoiseCovariance(m);
+  EXPECT_NEAR(along.dot(S * along), 4e-6, 1e-15);
+  EXPECT_NEAR(across.dot(S * across), 2.5e-7, 1e-15);
+  EXPECT_NEAR(along.dot(S * across), 0.0, 1e-15);
+  // A motion with no direction: the mean of the two variances on each axis.
+  EXPECT_LT((config.imageStepNoiseCovariance(Eigen::Vector2d::Zero()) -
+             0.5 * (4e-6 + 2.5e-7) * Eigen::Matrix2d::Identity()).norm(), 1e-18);
+
+  // Through the filter: the predicted covariance holds S in the world frame (no heading error, no pixel-size error
+  // in the linear configuration); a step eastwards gets its along-track noise on the east axis only.
+  NavigationFilter filter(config);
+  const Eigen::Matrix2d P0 = 1e-4 * Eigen::Matrix2d::Identity();
+  filter.initialize(10.0, Eigen::Vector2d(500.0, 600.0), P0);
+  MetricMotion motion = motionOf(Eigen::Vector2d(0.05, 0.0), 0.0);
+  motion.covariance_m2 = 1e-8 * Eigen::Matrix2d::Identity();
+  ASSERT_EQ(filter.addImageMotion(10.0, 10.2, motion).status, UpdateStatus::kApplied);
+  const Eigen::Matrix2d P = filter.current().position_covariance_m2;
+  const double q = config.position_noise_m2_per_s * 0.2;
+  EXPECT_NEAR(P(0, 0), 1e-4 + 1e-8 + q + 4e-6, 1e-15);
+  EXPECT_NEAR(P(1, 1), 1e-4 + 1e-8 + q + 2.5e-7, 1e-15);
+  EXPECT_NEAR(P(0, 1), 0.0, 1e-15);
 }
 
 TEST(NavigationFilter, PixelSizeAndHeadingAreEstimatedFromFixes) {
@@ -545,6 +578,9 @@ TEST(NavigationFilter, ConsistentOnDivesGeneratedFromItsModel) {
   dc.duration_s = 80.0;
   dc.fix_outlier_probability = 0.0;
   dc.model = FilterConfig();
+  // The registration's extra noise anisotropic, as measured on the simulated dives (larger across the motion).
+  dc.model.image_step_noise_along_m = 0.0004;
+  dc.model.image_step_noise_across_m = 0.002;
   dc.dr_scale_sigma = dc.model.initial_dr_scale_sigma;
   std::vector<double> sum_nees;
   for (int run = 0; run < runs; ++run) {

@@ -77,7 +77,8 @@ FilterState FilterState::from(double stamp_s, const StateVector& x, const StateM
 std::string FilterConfig::validate() const {
   std::ostringstream err;
   checkNonNegative(err, "position_noise_m2_per_s", position_noise_m2_per_s, "m^2/s");
-  checkNonNegative(err, "image_step_noise_m", image_step_noise_m, "m");
+  checkNonNegative(err, "image_step_noise_along_m", image_step_noise_along_m, "m");
+  checkNonNegative(err, "image_step_noise_across_m", image_step_noise_across_m, "m");
   checkPositive(err, "no_motion_position_noise_m2_per_s", no_motion_position_noise_m2_per_s, "m^2/s");
   checkNonNegative(err, "no_motion_speed_mps", no_motion_speed_mps, "m/s");
   checkNonNegative(err, "initial_pixel_size_correction_sigma", initial_pixel_size_correction_sigma, "");
@@ -105,6 +106,16 @@ std::string FilterConfig::validate() const {
   std::string s = err.str();
   if (!s.empty()) s.resize(s.size() - 2);
   return s;
+}
+
+Eigen::Matrix2d FilterConfig::imageStepNoiseCovariance(const Eigen::Vector2d& motion_m) const {
+  const double along2 = image_step_noise_along_m * image_step_noise_along_m;
+  const double across2 = image_step_noise_across_m * image_step_noise_across_m;
+  const double length_m = motion_m.norm();
+  if (!(length_m > 1e-6)) return 0.5 * (along2 + across2) * Eigen::Matrix2d::Identity();
+  const Eigen::Vector2d u = motion_m / length_m;
+  const Eigen::Matrix2d uu = u * u.transpose();
+  return along2 * uu + across2 * (Eigen::Matrix2d::Identity() - uu);
 }
 
 double FilterConfig::gateThreshold() const { return -2.0 * std::log1p(-gate_probability); }
@@ -528,9 +539,8 @@ void NavigationFilter::predictSegment(Working* w, double dt_s, double image_frac
     F.block<2, 1>(kEast, kPixelSize) = corrected;
     F.block<2, 1>(kEast, kHeading) = -scale * kJ * corrected;
     const Eigen::Matrix2d G_p = scale * A;
-    Q.block<2, 2>(kEast, kEast) += G_p * *motion_cov * G_p.transpose() + image_fraction *
-                                                                             std::pow(config_.image_step_noise_m, 2) *
-                                                                             Eigen::Matrix2d::Identity();
+    Q.block<2, 2>(kEast, kEast) +=
+        G_p * *motion_cov * G_p.transpose() + image_fraction * config_.imageStepNoiseCovariance(*motion_m);
     x.segment<2>(kEast) += dp;
     if (w->dr_initialized) {
       // The DR offset d' = d + G_d m, first order in the small errors c, psi and s:

@@ -14,7 +14,10 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
   const ParameterReader p(filter_nh);
   p.readDouble("position_noise_m2_per_s", &f->position_noise_m2_per_s, 0.0, 100.0,
                "position random walk with image motion (m^2/s)");
-  p.readDouble("image_step_noise_m", &f->image_step_noise_m, 0.0, 10.0, "extra 1-sigma per image step (m)");
+  p.readDouble("image_step_noise_along_m", &f->image_step_noise_along_m, 0.0, 10.0,
+               "extra 1-sigma per image step along its motion (m)");
+  p.readDouble("image_step_noise_across_m", &f->image_step_noise_across_m, 0.0, 10.0,
+               "extra 1-sigma per image step across its motion (m)");
   p.readPositiveDouble("no_motion_position_noise_m2_per_s", &f->no_motion_position_noise_m2_per_s, 1e4,
                        "position random walk where no image motion covers the time (m^2/s)");
   p.readDouble("no_motion_speed_mps", &f->no_motion_speed_mps, 0.0, 20.0,

@@ -12,8 +12,11 @@
  * - Image motion m (metres, from toMetricMotion, covariance R_m) between the previous image's stamp a and the
  *   current one b is the filter's prediction (the report's control input): over a part [u, v] of [a, b], with
  *   f = (v - u) / (b - a) (constant velocity between two images):
- *     p' = p + (1 + c) R(-psi) f m,   noise (1 + c)^2 R(-psi) (f R_m) R(-psi)^T + f image_step_noise_m^2 I
- *                                       + position_noise_m2_per_s (v - u) I.
+ *     p' = p + (1 + c) R(-psi) f m,   noise (1 + c)^2 R(-psi) (f R_m) R(-psi)^T + f S(m)
+ *                                       + position_noise_m2_per_s (v - u) I,
+ *   S(m) = image_step_noise_along_m^2 u u^T + image_step_noise_across_m^2 (I - u u^T), u = m / |m|: the extra
+ *   noise of one step along and across its own motion (a registration's error is not isotropic: with the image
+ *   moving along one axis, the overlap, the motion blur and the altitude's error all differ along and across it).
  *   R(-psi) undoes the heading error: the attitude that turned the image motion into east/north has yaw + psi.
  * - Heading: psi' = psi + psi_dot dt, psi_dot a random walk (integrated random walk, exact discretisation);
  *   c a slow random walk.
@@ -75,8 +78,11 @@ struct FilterConfig {
   // --- Image motion and position ---
   /// Position random walk with image motion (m^2/s, >= 0): unmodelled motion errors per second.
   double position_noise_m2_per_s = 1e-6;
-  /// Extra 1-sigma per image step (m, >= 0): errors of the flat-seabed conversion (relief, refraction).
-  double image_step_noise_m = 0.001;
+  /// Extra 1-sigma per image step (m, >= 0) along the step's motion: errors the registration's covariance does not
+  /// hold (flat-seabed conversion, relief, refraction, the altitude's error).
+  double image_step_noise_along_m = 0.001;
+  /// The same across the step's motion (m, >= 0).
+  double image_step_noise_across_m = 0.001;
   /// Position random walk when no image motion covers an interval (m^2/s, > 0): the vehicle's motion is unknown
   /// there (0.25 = 0.5 m/s of unknown speed over one second).
   double no_motion_position_noise_m2_per_s = 0.25;
@@ -117,6 +123,9 @@ struct FilterConfig {
 
   /// "" or each problem, naming the field and its allowed range.
   std::string validate() const;
+  /// S(m) of the file comment, for a step's motion m (m, east/north); isotropic (the mean of the two variances) for
+  /// a motion shorter than 1 micrometre, whose direction means nothing.
+  Eigen::Matrix2d imageStepNoiseCovariance(const Eigen::Vector2d& motion_m) const;
   /// Mahalanobis^2 threshold of the gate: the chi-square (2 dof) quantile -2 ln(1 - gate_probability).
   double gateThreshold() const;
 };
