@@ -95,6 +95,40 @@ TEST(ServoImageRenderer, DepthBackProjectsOntoTheSurface) {
          seabed, worst);
 }
 
+TEST(ServoImageRenderer, DistanceToTheSceneIsExactAtTheRims) {
+  sim::VentSceneConfig scene;  // chimney 0.3 m high, radius 0.1 m at the base and 0.05 m at the top
+  scene.base_m = Eigen::Vector3d(1.0, -2.0, -0.5);
+  const auto at = [&](double x, double y, double z) { return sim::distanceToScene(scene, scene.base_m + Eigen::Vector3d(x, y, z)); };
+  // On each surface: the seabed, the side (half way up: radius 0.075 m), the top cap, both rims.
+  EXPECT_NEAR(at(0.5, 0.3, 0.0), 0.0, 1e-12);
+  EXPECT_NEAR(at(0.0, 0.075, 0.15), 0.0, 1e-12);
+  EXPECT_NEAR(at(0.02, 0.0, 0.3), 0.0, 1e-12);
+  EXPECT_NEAR(at(0.05, 0.0, 0.3), 0.0, 1e-12);
+  EXPECT_NEAR(at(0.0, -0.1, 0.0), 0.0, 1e-12);
+  // Just above and outside the top rim: the rim, 1.4 cm away (the seabed is 0.31 m away); level with the cap, the
+  // side, which slopes outwards below the rim, is nearer than the rim.
+  EXPECT_NEAR(at(0.06, 0.0, 0.31), std::hypot(0.01, 0.01), 1e-12);
+  EXPECT_NEAR(at(0.06, 0.0, 0.3), 0.003 / std::hypot(0.05, 0.3), 1e-12);
+  // Diagonally above the top rim: the distance to the rim point.
+  EXPECT_NEAR(at(0.08, 0.0, 0.34), 0.05, 1e-12);
+  // Above the cap: straight down to it; inside the chimney: to the nearest wall or the cap.
+  EXPECT_NEAR(at(0.0, 0.0, 0.5), 0.2, 1e-12);
+  EXPECT_NEAR(at(0.0, 0.0, 0.29), 0.01, 1e-12);
+  // Below the chimney's foot (under the seabed): the base rim, not the seabed plane.
+  EXPECT_NEAR(at(0.0, 0.0, -0.1), std::hypot(0.1, 0.1), 1e-12);
+  // Beyond the seabed's textured square (half side 3 m) the plane goes on.
+  EXPECT_NEAR(at(3.4, 0.0, 0.3), 0.3, 1e-12);
+  // Without the seabed, a point on the seabed plane is only as close as the chimney.
+  scene.draw_seabed = false;
+  EXPECT_NEAR(at(0.5, 0.0, 0.0), 0.4, 1e-12);
+  // The renderer's member is the same function.
+  scene.draw_seabed = true;
+  scene.supersampling = 1;
+  const sim::VentRenderer renderer(scene);
+  EXPECT_NEAR(renderer.distanceToSurface(scene.base_m + Eigen::Vector3d(0.06, 0.0, 0.31)), std::hypot(0.01, 0.01),
+              1e-12);
+}
+
 TEST(ServoImageRenderer, SmoothDepthRejectsTheSilhouette) {
   const sim::ImageServoSetup s = rigSetup();
   const sim::RenderedView view = renderer().render(s.controlled_camera, s.world_T_reference);

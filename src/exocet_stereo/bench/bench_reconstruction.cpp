@@ -236,22 +236,6 @@ struct VentSettings {
   double seabed_margin_m = 0.005;  ///< points below this height belong to the seabed, not the chimney
 };
 
-/// Exact distance (m) from a point to the vent's surface: in the half-plane (distance from the axis, height) the
-/// surface is the polyline seabed -> base rim -> top rim -> axis. VentRenderer::distanceToSurface() is exact only away
-/// from the rims (just outside the top rim it returns the distance to the seabed, 0.3 m), so it is not used for the
-/// figure.
-double distanceToVent(const exocet_servo::sim::VentSceneConfig& scene, const Eigen::Vector3d& p) {
-  const Eigen::Vector2d q(std::hypot(p.x() - scene.base_m.x(), p.y() - scene.base_m.y()), p.z() - scene.base_m.z());
-  auto toSegment = [&q](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    const double t = std::clamp((q - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
-    return (a + t * (b - a) - q).norm();
-  };
-  const Eigen::Vector2d base_rim(scene.base_radius_m, 0.0), top_rim(scene.top_radius_m, scene.height_m);
-  double d = std::min(toSegment(base_rim, top_rim), toSegment(top_rim, Eigen::Vector2d(0.0, scene.height_m)));
-  if (scene.draw_seabed) d = std::min(d, q.x() >= scene.base_radius_m ? std::abs(q.y()) : (q - base_rim).norm());
-  return d;
-}
-
 /// RMS (m) of the true surface distance over the points whose height is at least min_z_m, and their count.
 std::pair<double, long> rmsDistance(const exocet_servo::sim::VentSceneConfig& scene,
                                     const std::vector<Eigen::Vector3d>& points, double min_z_m) {
@@ -259,7 +243,7 @@ std::pair<double, long> rmsDistance(const exocet_servo::sim::VentSceneConfig& sc
   long n = 0;
   for (const auto& p : points) {
     if (p.z() < min_z_m) continue;
-    sum2 += std::pow(distanceToVent(scene, p), 2);
+    sum2 += std::pow(exocet_servo::sim::distanceToScene(scene, p), 2);
     ++n;
   }
   return {n > 0 ? std::sqrt(sum2 / n) : NAN, n};

@@ -75,19 +75,8 @@ class VentRing : public ::testing::Test {
   static FusedCloud crop(const FusedCloud& cloud) {
     return cloud.cropped(Eigen::Vector3d(-0.15, -0.15, -0.01), Eigen::Vector3d(0.15, 0.15, 0.32));
   }
-  /// Exact distance to the vent: in the half-plane (distance from the axis, height) the surface is the polyline
-  /// seabed -> base rim -> top rim -> axis (VentRenderer::distanceToSurface() is approximate next to the rims).
-  static double distance(const Eigen::Vector3d& p) {
-    const sim::VentSceneConfig& scene = renderer_->config();
-    const Eigen::Vector2d q(std::hypot(p.x() - scene.base_m.x(), p.y() - scene.base_m.y()), p.z() - scene.base_m.z());
-    auto toSegment = [&q](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-      const double t = std::clamp((q - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
-      return (a + t * (b - a) - q).norm();
-    };
-    const Eigen::Vector2d base_rim(scene.base_radius_m, 0.0), top_rim(scene.top_radius_m, scene.height_m);
-    const double seabed = q.x() >= scene.base_radius_m ? std::abs(q.y()) : (q - base_rim).norm();
-    return std::min({seabed, toSegment(base_rim, top_rim), toSegment(top_rim, Eigen::Vector2d(0.0, scene.height_m))});
-  }
+  /// Exact distance to the vent, rims included.
+  static double distance(const Eigen::Vector3d& p) { return renderer_->distanceToSurface(p); }
   static double maxDistance(const std::vector<Eigen::Vector3d>& points) {
     double worst = 0.0;
     for (const auto& p : points) worst = std::max(worst, distance(p));

@@ -284,18 +284,26 @@ double VentRenderer::depthAt(const PinholeCamera& camera, const Eigen::Isometry3
   return hit.kind == SurfaceKind::kNone ? kInf : hit.t;
 }
 
-double VentRenderer::distanceToSurface(const Eigen::Vector3d& p) const {
-  const VentSceneConfig& c = config_;
-  double best = kInf;
-  const double h = p.z() - c.base_m.z();
-  if (c.draw_seabed) best = std::abs(h);
-  const double rho = std::hypot(p.x() - c.base_m.x(), p.y() - c.base_m.y());
-  const double s = (c.top_radius_m - c.base_radius_m) / c.height_m;
-  if (h >= 0.0 && h <= c.height_m)
-    best = std::min(best, std::abs(rho - (c.base_radius_m + s * h)) / std::sqrt(1.0 + s * s));
-  if (rho <= c.top_radius_m) best = std::min(best, std::abs(h - c.height_m));
+double distanceToScene(const VentSceneConfig& scene, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d r = p - scene.base_m;
+  const Eigen::Vector2d q(std::hypot(r.x(), r.y()), r.z());  // (distance from the axis, height)
+  const auto toSegment = [&q](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    const double t = std::clamp((q - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+    return (a + t * (b - a) - q).norm();
+  };
+  const Eigen::Vector2d base_rim(scene.base_radius_m, 0.0), top_rim(scene.top_radius_m, scene.height_m);
+  double best = std::min(toSegment(base_rim, top_rim), toSegment(top_rim, Eigen::Vector2d(0.0, scene.height_m)));
+  if (scene.draw_seabed) {
+    if (q.x() >= scene.base_radius_m) {  // nearest seabed point straight below (the plane is drawn, untextured,
+      best = std::min(best, std::abs(q.y()));  // beyond its textured square too)
+    } else {  // above or below the chimney's foot: the nearest seabed point is on the base rim
+      best = std::min(best, (q - base_rim).norm());
+    }
+  }
   return best;
 }
+
+double VentRenderer::distanceToSurface(const Eigen::Vector3d& p) const { return distanceToScene(config_, p); }
 
 }  // namespace sim
 }  // namespace exocet_servo

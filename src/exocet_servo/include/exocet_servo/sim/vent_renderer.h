@@ -41,6 +41,14 @@ struct VentSceneConfig {
   std::string validate() const;
 };
 
+/**
+ * @brief Exact distance (m) from a world point to the scene's drawn surfaces, rims included: in the half-plane
+ * (distance from the axis, height above the base) the chimney is the polyline base rim -> top rim -> axis (side and
+ * top cap), and the seabed (when drawn) is the plane outside the chimney's foot. The ground truth of the
+ * reconstruction's accuracy figures.
+ */
+double distanceToScene(const VentSceneConfig& scene, const Eigen::Vector3d& point_w);
+
 /// What a ray hit.
 enum class SurfaceKind { kNone, kChimney, kTop, kSeabed };
 
@@ -69,7 +77,7 @@ class VentRenderer {
   double depthAt(const PinholeCamera& camera, const Eigen::Isometry3d& world_T_camera, const Eigen::Vector2d& px,
                  SurfaceKind* kind = nullptr) const;
 
-  /// Distance (m) from a world point to the nearest drawn surface (0 on the surface; for tests).
+  /// Exact distance (m) from a world point to the nearest drawn surface (0 on the surface), distanceToScene().
   double distanceToSurface(const Eigen::Vector3d& point_w) const;
 
   const VentSceneConfig& config() const { return config_; }
