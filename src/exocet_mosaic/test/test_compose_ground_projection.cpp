@@ -103,8 +103,10 @@ TEST(ComposeConfig, ValidateNamesEveryBadField) {
   c.anchor = "affine";
   c.gsd_m = -1;
   c.lighting.max_gain = 0.5;
+  c.navigation_samples_per_mosaic = 0.5;
   const std::string e = c.validate();
-  for (const char* field : {"frames_per_mosaic", "[2, 100000]", "blend", "anchor", "gsd_m", "lighting.max_gain"})
+  for (const char* field : {"frames_per_mosaic", "[2, 100000]", "blend", "anchor", "gsd_m", "lighting.max_gain",
+                            "navigation_samples_per_mosaic"})
     EXPECT_NE(e.find(field), std::string::npos) << field << " missing in: " << e;
   EXPECT_THROW(ec::MosaicComposer composer(c), std::invalid_argument);
   ec::MosaicComposer ok{ec::ComposerConfig()};

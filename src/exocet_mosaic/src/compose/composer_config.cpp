@@ -37,6 +37,8 @@ std::string ComposerConfig::validate() const {
         anchor_prior_sigma);
   check(tile_continuity_sigma_m >= 0.0 && tile_continuity_sigma_m <= 1000.0, "tile_continuity_sigma_m", "in [0, 1000]",
         tile_continuity_sigma_m);
+  check(navigation_samples_per_mosaic >= 1.0 && navigation_samples_per_mosaic <= 10000.0,
+        "navigation_samples_per_mosaic", "in [1, 10000]", navigation_samples_per_mosaic);
   check(resample_threshold_px >= 0.0 && resample_threshold_px <= 1000.0, "resample_threshold_px", "in [0, 1000]",
         resample_threshold_px);
   check(block_size_px >= 16 && block_size_px <= 4096, "block_size_px", "in [16, 4096]", block_size_px);

@@ -35,14 +35,25 @@ std::array<Eigen::Vector2d, 4> imageCorners(const cv::Size& s) {
 
 Eigen::Vector2d imageCentre(const cv::Size& s) { return Eigen::Vector2d(0.5 * (s.width - 1), 0.5 * (s.height - 1)); }
 
+/// Where consecutive mosaics are tied: a 3 x 3 grid over the shared image (corners, edge midpoints, centre). The
+/// closed tile places the image through the chain, the next one through its pose: the two differ by a little
+/// perspective that a similarity cannot absorb; over the grid the fit matches them on average over the image, where
+/// the tiles overlap, rather than at the four corners only.
+std::vector<Eigen::Vector2d> tieGrid(const cv::Size& s) {
+  std::vector<Eigen::Vector2d> grid;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) grid.emplace_back(-0.5 + 0.5 * c * s.width, -0.5 + 0.5 * r * s.height);
+  return grid;
+}
+
 }  // namespace
 
 /// Where the next mosaic's fit is tied to the closed one (their shared image).
 struct ContinuityTie {
   bool valid = false;
-  std::array<Eigen::Vector2d, 4> corners_utm;  // shared image's corners where the closed tile put them
-  Eigen::MatrixXd error_cov;                   // 8x8: their joint uncertainty (closed fit + continuity slack)
-  cv::Matx33d utm_from_px;  // the closed mosaic's placement of the shared image, relative to utm_origin
+  std::vector<Eigen::Vector2d> points_utm;  // the shared image's tieGrid() where the closed tile put it
+  Eigen::MatrixXd error_cov;                // 2n x 2n: their joint uncertainty (closed fit + continuity slack)
+  cv::Matx33d utm_from_px;                  // the closed mosaic's placement of the shared image, relative to utm_origin
   Eigen::Vector2d utm_origin = Eigen::Vector2d::Zero();
   double gsd_m = 0;
 };
@@ -474,16 +485,18 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
     m->points.push_back(p);
     m->running.add(p);
   }
-  if (continued && s.tie.valid) {
+  if (continued && s.tie.valid && s.tie.points_utm.size() == tieGrid(size).size()) {
     // Tied with the continuity slack only: the tiles stay aligned; the closed tile's own uncertainty enters the
-    // reported covariance (sandwich), not the weights.
-    const auto corners = imageCorners(size);
+    // reported covariance (sandwich), not the weights. The grid's points are one position known within the slack
+    // (each weighs 1/n of it), against the few independent fused positions the tile's images are worth (closeMosaic()).
+    const auto grid = tieGrid(size);
+    const double n = static_cast<double>(grid.size());
     const double slack = std::max(1e-4, config_.tile_continuity_sigma_m);
-    for (int i = 0; i < 4; ++i) {
+    for (std::size_t i = 0; i < grid.size(); ++i) {
       AnchorPoint p;
-      p.local_m = applyHomography(m->p_first, corners[i]);
-      p.measured_m = s.tie.corners_utm[i] - ref;
-      p.cov_m2 = Eigen::Matrix2d::Identity() * slack * slack;
+      p.local_m = applyHomography(m->p_first, grid[i]);
+      p.measured_m = s.tie.points_utm[i] - ref;
+      p.cov_m2 = Eigen::Matrix2d::Identity() * n * slack * slack;
       m->tie.points.push_back(p);
       m->running.add(p);
     }
@@ -509,7 +522,18 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   const cv::Rect region = m.canvas.dataBounds();
   if (region.empty()) return std::nullopt;
 
-  const AnchorFit fit = fitAnchor(m.points, m.tie.points.empty() ? nullptr : &m.tie, m.similarity, m.prior_sigma, true);
+  // The fused positions of a tile's images share most of their error: the filter's errors are correlated over
+  // seconds (USBL fixes filtered by dead reckoning), so a tile's N images are a few independent measurements of where
+  // the tile is, not N. Weighed as N, they outweighed the continuity tie (the shared image jumped between tiles by
+  // 10-30 % of the navigation's disagreement with the chain: PAL bench dive 4 px) and their noise set the tile's
+  // scale and rotation (+-1-2 % over a 3 m tile). They weigh as navigation_samples_per_mosaic positions, spread over
+  // the images (an outlier among them moves the fit by 1/N of their share; add() leaves out those that depart).
+  // The value trades the seams against how soon the navigation corrects the chain's scale (composer_config.h).
+  std::vector<AnchorPoint> navigation = m.points;
+  const double n_nav = static_cast<double>(navigation.size());
+  for (auto& p : navigation) p.cov_m2 *= std::max(1.0, n_nav / config_.navigation_samples_per_mosaic);
+  const AnchorFit fit =
+      fitAnchor(navigation, m.tie.points.empty() ? nullptr : &m.tie, m.similarity, m.prior_sigma, true);
   ClosedMosaic out;
   if (config_.blend == "multiband" && m.all_kept && !m.kept.empty()) {
     blendMultiband(m.kept, region, config_.multiband_bands, m.channels, &out.image, &out.mask);
@@ -586,15 +610,17 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   tie.utm_origin = m.ref_en_m;
   tie.gsd_m = g;
   const double q2 = config_.tile_continuity_sigma_m * config_.tile_continuity_sigma_m;
-  const auto corners = imageCorners(m.last_size);
-  Eigen::Matrix<double, 8, 4> j;
-  for (int i = 0; i < 4; ++i) {
-    const Eigen::Vector2d l = applyHomography(local_from_px, corners[i]);
-    tie.corners_utm[i] = m.ref_en_m + fit.apply(l);
+  const auto grid = tieGrid(m.last_size);
+  const int n = static_cast<int>(grid.size());
+  Eigen::MatrixXd j(2 * n, 4);
+  tie.points_utm.clear();
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d l = applyHomography(local_from_px, grid[i]);
+    tie.points_utm.push_back(m.ref_en_m + fit.apply(l));
     const Eigen::Vector2d d = l - fit.centre_m;
     j.block<2, 4>(2 * i, 0) << d.x(), -d.y(), 1, 0, d.y(), d.x(), 0, 1;
   }
-  tie.error_cov = j * fit.cov * j.transpose() + q2 * Eigen::Matrix<double, 8, 8>::Identity();
+  tie.error_cov = j * fit.cov * j.transpose() + q2 * Eigen::MatrixXd::Identity(2 * n, 2 * n);
   tie.valid = true;
   ++s.stats.mosaics_closed;
   return out;

@@ -30,6 +30,8 @@ void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
   p.readString("anchor", &c->anchor, {"similarity", "translation"}, "fit of the chain to the fused navigation");
   p.readDouble("tile_continuity_sigma_m", &c->tile_continuity_sigma_m, 0.0, 1000.0,
                "how strongly a tile is tied to the previous one where they share an image (m)");
+  p.readDouble("navigation_samples_per_mosaic", &c->navigation_samples_per_mosaic, 1.0, 10000.0,
+               "independent fused positions a mosaic's images are worth in its placement");
   p.readBool("lighting/enabled", &c->lighting.enabled,
              "correct the lamp cone and vignetting estimated from the images");
   p.readInt("lighting/warmup_frames", &c->lighting.warmup_frames, 1, 100000, "images averaged before correcting");

@@ -10,13 +10,17 @@
  * local frame. At close, a 2-D similarity (or translation) S: local -> UTM is fitted by weighted, Huber-robust least
  * squares between L_i(image centre) and the fused ground points P_i(image centre) of every image of the mosaic (the
  * centre rather than the nadir: it is inside the image however the camera is tilted, and the pose's attitude is
- * accounted for). S's translation goes into the tile's origin; its rotation/scale are applied (one resampling) only
- * when they move the tile's corners by more than resample_threshold_px.
+ * accounted for). The fused positions' errors are correlated over many images (a filter's), so the N images of a
+ * mosaic weigh together as a few (navigation_samples_per_mosaic, 4) independent fused positions, not N. S's translation goes into
+ * the tile's origin; its rotation/scale are applied (one resampling) only when they move the tile's corners by more
+ * than resample_threshold_px.
  *
- * Consecutive mosaics share one image. The next mosaic's fit follows where the closed one put that image's corners
- * within tile_continuity_sigma_m, so that independent navigation noise does not misalign neighbouring tiles, while
- * the navigation still holds the chain of tiles globally (its anchor_sigma_m accounts for the closed tile's
- * uncertainty that the tie carries over). After a navigation jump or a flush the next mosaic starts untied.
+ * Consecutive mosaics share one image. The next mosaic's fit follows where the closed one put that image (a 3 x 3
+ * grid of its points, together one position known within tile_continuity_sigma_m), so that the navigation's errors
+ * do not misalign neighbouring tiles; each tile moves towards the navigation by 4 s^2 / (4 s^2 + sigma^2) of their
+ * disagreement (s the slack, sigma the fused 1-sigma): the navigation holds the chain of tiles globally over about
+ * (sigma / 2 s)^2 tiles, the chain holds it meanwhile (its anchor_sigma_m accounts for the closed tile's uncertainty
+ * that the tie carries over). After a navigation jump or a flush the next mosaic starts untied.
  */
 #pragma once
 
