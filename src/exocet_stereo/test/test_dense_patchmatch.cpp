@@ -1,5 +1,6 @@
 // PatchMatch Stereo ("pm"): a synthetic slanted plane recovered to sub-pixel accuracy (better than fronto-parallel
-// SSD), a Tsukuba bad-pixel bound, thread-independent results, plane-based hole filling and config checks.
+// SSD), Venus' left border band matched although windows there reach outside the right image, a Tsukuba bad-pixel
+// bound, thread-independent results, plane-based hole filling and config checks.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -88,6 +89,20 @@ TEST(PatchMatchStereo, RecoversSlantedPlaneToSubPixelAccuracyWhereSsdCannot) {
   EXPECT_NEAR(slopes_y[slopes_y.size() / 2], 0.04, 0.01);
 }
 
+TEST(PatchMatchStereo, VenusLeftBorderBandIsMatched) {
+  // Venus' left border band (rows 230-299, columns 0-119, disparity ~14-16 px): the window of a pixel close to the
+  // border partly matches outside the right image. Those window pixels must not drag its plane off the true one.
+  const MiddleburyScene scene = loadMiddleburyScene(kData + "venus");
+  const cv::Rect crop(0, 230, 120, 70);
+  const DenseStereoConfig config = defaultConfigFor("pm", scene.max_disparity_px);
+  const PlaneMaps planes = PatchMatchStereo(config).computePlanes(scene.left(crop), scene.right(crop));
+  const cv::Mat disparity = planeDisparity(planes.left);
+  const cv::Rect band(0, 0, 40, crop.height);
+  const double bad = badPixelPercent(disparity(band), scene.ground_truth_px(crop)(band), scene.nonocc(crop)(band));
+  std::printf("venus left border band (columns 0-39, raw planes): %.2f %% bad non-occluded pixels\n", bad);
+  EXPECT_LT(bad, 12.0);  // 6.2 % measured; 35 % with the former maximal cost outside
+}
+
 TEST(PatchMatchStereo, ResultDoesNotDependOnThreadCount) {
   const SyntheticPair pair = makeSlantedPlanePair(0.05, 0.0, 2.0, 64, 48);
   DenseStereoConfig config = defaultConfigFor("pm", 10);
@@ -115,8 +130,8 @@ TEST(PatchMatchStereo, TsukubaNonOccludedBadPixelsBounded) {
   const BadPixelRates rates = evaluateDisparity(disparity, scene);
   std::printf("tsukuba pm (window step 2): nonocc %.2f all %.2f disc %.2f %% in %.1f s\n", rates.nonocc, rates.all,
               rates.disc, seconds);
-  EXPECT_LT(rates.nonocc, 3.5);
-  EXPECT_LT(rates.all, 5.0);
+  EXPECT_LT(rates.nonocc, 3.2);  // 2.68 measured (full window, every pixel: 2.37)
+  EXPECT_LT(rates.all, 3.5);     // 2.86 measured
 }
 
 TEST(PatchMatchStereo, FillsHolesWithTheLowerNeighbouringPlane) {

@@ -117,7 +117,6 @@ class ViewSolver {
     alpha_ = static_cast<float>(config.pm_alpha);
     tau_color_ = static_cast<float>(config.pm_tau_color);
     tau_gradient_ = static_cast<float>(config.pm_tau_gradient);
-    max_cost_ = (1.0f - alpha_) * tau_color_ + alpha_ * tau_gradient_;
     max_disparity_ = static_cast<float>(config.max_disparity_px);
     planes_.resize(static_cast<size_t>(self.rows) * self.cols);
     costs_.assign(planes_.size(), std::numeric_limits<float>::infinity());
@@ -287,22 +286,20 @@ class ViewSolver {
     const float one_minus_alpha = 1.0f - alpha_;
     float total = 0.0f;
     for (const Sample& s : window) {
-      const float xo = s.x - sign_ * plane.at(s.x, s.y);
-      float c;
-      if (!(xo >= 0.0f && xo <= last_x)) {
-        c = max_cost_;  // matched outside the other image
-      } else {
-        int i0 = static_cast<int>(xo);
-        if (i0 >= other_.cols - 1) i0 = other_.cols - 2;
-        const float t = xo - static_cast<float>(i0);
-        const float* f0 = features + static_cast<size_t>(s.row_offset + i0) * kFeatures;
-        const float* f1 = f0 + kFeatures;
-        float color = 0.0f;
-        for (int k = 0; k < 3; ++k) color += std::fabs(f0[k] + t * (f1[k] - f0[k]) - s.f[k]);
-        const float gradient =
-            std::fabs(f0[3] + t * (f1[3] - f0[3]) - s.f[3]) + std::fabs(f0[4] + t * (f1[4] - f0[4]) - s.f[4]);
-        c = one_minus_alpha * std::min(color, tau_color_) + alpha_ * std::min(gradient, tau_gradient_);
-      }
+      // A window pixel matched outside the other image compares with its border column (clamped) rather than paying
+      // the maximal cost: that penalty favoured any plane keeping the window inside, so pixels near the left border
+      // lost their true plane (Venus' left border band: 35 % -> 6 % bad pixels).
+      const float xo = std::min(std::max(s.x - sign_ * plane.at(s.x, s.y), 0.0f), last_x);
+      int i0 = static_cast<int>(xo);
+      if (i0 >= other_.cols - 1) i0 = other_.cols - 2;
+      const float t = xo - static_cast<float>(i0);
+      const float* f0 = features + static_cast<size_t>(s.row_offset + i0) * kFeatures;
+      const float* f1 = f0 + kFeatures;
+      float color = 0.0f;
+      for (int k = 0; k < 3; ++k) color += std::fabs(f0[k] + t * (f1[k] - f0[k]) - s.f[k]);
+      const float gradient =
+          std::fabs(f0[3] + t * (f1[3] - f0[3]) - s.f[3]) + std::fabs(f0[4] + t * (f1[4] - f0[4]) - s.f[4]);
+      const float c = one_minus_alpha * std::min(color, tau_color_) + alpha_ * std::min(gradient, tau_gradient_);
       total += s.w * c;
       if (total >= bound) return total;
     }
@@ -315,7 +312,7 @@ class ViewSolver {
   const int view_index_;
   const float sign_;
   std::vector<float> weight_table_;
-  float alpha_, tau_color_, tau_gradient_, max_cost_, max_disparity_;
+  float alpha_, tau_color_, tau_gradient_, max_disparity_;
   std::vector<Plane> planes_;
   std::vector<float> costs_;
 };

@@ -12,10 +12,12 @@
  *
  * Differences from the paper, on purpose: view propagation pushes each view's planes to the other view once before
  * that view's pass (not per pixel inside the pass); window pixels with weight below pm_min_weight are skipped; a
- * candidate's window sum stops as soon as it reaches the pixel's best cost. The scan itself is the paper's sequential
- * one, run as anti-diagonal wavefronts: a pixel only reads its two already-visited neighbours, so all pixels of one
- * anti-diagonal are independent and the result equals the raster scan's exactly, for any number of threads
- * (random draws are a hash of seed, view, iteration and pixel).
+ * candidate's window sum stops as soon as it reaches the pixel's best cost; a window pixel whose match q' falls
+ * outside the other image is compared with that image's border column (the paper does not say; a maximal cost there
+ * favours any plane that keeps the window inside and cost Venus' left border band a third of its pixels). The scan
+ * itself is the paper's sequential one, run as anti-diagonal wavefronts: a pixel only reads its two already-visited
+ * neighbours, so all pixels of one anti-diagonal are independent and the result equals the raster scan's exactly, for
+ * any number of threads (random draws are a hash of seed, view, iteration and pixel).
  *
  * Post-processing (compute()): left-right check, then each invalid pixel takes the lower of the planes of its nearest
  * valid left and right neighbours evaluated at the pixel, then a colour-weighted median over the filled pixels, as in
