@@ -27,6 +27,14 @@ FrameFactory makeFactory(const TruthOrtho& truth, double noise_m) {
   return f;
 }
 
+/// The same flight with small images (160 x 120, 200 px focal length), for the tests that close many tiles.
+FrameFactory makeSmallImageFactory(const TruthOrtho& truth, double noise_m) {
+  FrameFactory f = makeFactory(truth, noise_m);
+  f.flight.image_size = cv::Size(160, 120);
+  f.flight.k = cv::Matx33d(200, 0, 79.5, 0, 200, 59.5, 0, 0, 1);
+  return f;
+}
+
 const TruthOrtho& truth() {
   static const TruthOrtho t = TruthOrtho::make(11.0, 7.0, 0.005, 500000.0 - 2.0, 4800000.0 + 3.0);
   return t;
@@ -69,9 +77,7 @@ TEST(ComposePlacement, ExactPosesExactChainMatchTheTruth) {
 TEST(ComposePlacement, NoisyPositionsAverageOutAndSigmaIsConsistent) {
   // Small images for speed; the navigation noise is independent per image here (a worst case for the fit's
   // assumptions would be correlated noise).
-  FrameFactory factory = makeFactory(truth(), 0.1);
-  factory.flight.image_size = cv::Size(160, 120);
-  factory.flight.k = cv::Matx33d(200, 0, 79.5, 0, 200, 59.5, 0, 0, 1);
+  FrameFactory factory = makeSmallImageFactory(truth(), 0.1);
   ec::ComposerConfig config = baseConfig();
   config.frames_per_mosaic = 50;
   // Independent tiles: each tile's fit against its own navigation (the continuity tie, tested below, makes tiles
@@ -106,9 +112,7 @@ TEST(ComposePlacement, CorrelatedNavigationErrorsDoNotMoveTheSharedImage) {
   // A filter's fused positions are off by an error that wanders over seconds (here up to 6 cm, changing by 1-4 cm
   // between tiles), not by independent noise. The shared image of consecutive tiles must stay where the closed tile
   // put it (the tie), not follow the navigation's disagreement with the chain: the tiles would show a seam.
-  FrameFactory factory = makeFactory(truth(), 0.0);
-  factory.flight.image_size = cv::Size(160, 120);
-  factory.flight.k = cv::Matx33d(200, 0, 79.5, 0, 200, 59.5, 0, 0, 1);
+  FrameFactory factory = makeSmallImageFactory(truth(), 0.0);
   ec::ComposerConfig config = baseConfig();
   config.frames_per_mosaic = 50;
   ec::MosaicComposer composer(config);
