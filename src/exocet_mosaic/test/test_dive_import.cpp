@@ -34,6 +34,7 @@
 #include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_mosaic/sim/dive_import.h"
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::DiveBagWriter;
@@ -48,30 +49,7 @@ constexpr int kSparusFrames = 22;
 constexpr int kSparusNavRows = 50;
 
 /// A fresh folder under the system's temporary folder, removed with everything in it.
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "test_dive_import.XXXXXX").string();
-    if (!::mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-    path_ = pattern;
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  std::string operator/(const std::string& name) const { return path_ + "/" + name; }
-  const std::string& path() const { return path_; }
-  /// Names of the files in the folder (to check that nothing partial is left behind).
-  std::vector<std::string> files() const {
-    std::vector<std::string> names;
-    for (const auto& entry : fs::directory_iterator(path_)) names.push_back(entry.path().filename().string());
-    std::sort(names.begin(), names.end());
-    return names;
-  }
-
- private:
-  std::string path_;
-};
+using TempDir = exocet_mosaic::testing::TempDir;
 
 void writeText(const std::string& path, const std::string& text) {
   std::ofstream out(path);

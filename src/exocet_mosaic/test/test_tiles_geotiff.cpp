@@ -32,6 +32,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::tiles::epsgForUtm;
@@ -44,21 +45,7 @@ using exocet_mosaic::tiles::WrittenTile;
 namespace {
 
 /// A fresh folder under /tmp, removed with its contents.
-class TempDir {
- public:
-  TempDir() {
-    char name[] = "/tmp/exocet_tiles_XXXXXX";
-    path_ = ::mkdtemp(name);
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using TempDir = exocet_mosaic::testing::TempDir;
 
 struct DatasetCloser {
   void operator()(GDALDataset* d) const {

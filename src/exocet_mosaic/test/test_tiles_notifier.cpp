@@ -23,6 +23,7 @@
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_json.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
+#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::tiles::GeoTiffTileWriter;
@@ -84,21 +85,7 @@ class UdpReceiver {
   int port_ = 0;
 };
 
-class TempDir {
- public:
-  TempDir() {
-    char name[] = "/tmp/exocet_tiles_udp_XXXXXX";
-    path_ = ::mkdtemp(name);
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using TempDir = exocet_mosaic::testing::TempDir;
 
 /// A real tile (zone 56 S, Sydney) with COG and KMZ, so that every path is set.
 WrittenTile writeTile(const std::string& folder) {

@@ -12,6 +12,7 @@
 
 #include "exocet_stereo/io/mesh_export.h"
 #include "exocet_stereo/mesh/image_mesher.h"
+#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 namespace mesh = exocet_stereo::mesh;
@@ -24,21 +25,7 @@ constexpr int kWidth = 160;
 constexpr int kHeight = 120;
 
 /// Fresh empty folder under the temp dir, removed at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "exocet_mesh_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string file(const std::string& name) const { return (fs::path(path_) / name).string(); }
-
- private:
-  std::string path_;
-};
+using TempDir = exocet_mosaic::testing::TempDir;
 
 /// Sphere-cap mesh (analytic depth) with a random colour texture.
 mesh::TexturedMesh makeMesh() {

@@ -26,6 +26,7 @@
 #include "exocet_stereo/mesh/cloud_fusion.h"
 #include "exocet_stereo/mesh/cloud_surface.h"
 #include "exocet_stereo/mesh/surface_texturing.h"
+#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace {
 
@@ -42,21 +43,7 @@ double secondsSince(const std::chrono::steady_clock::time_point& start) {
 }
 
 /// Fresh empty folder under the temp dir, removed at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "exocet_texturing_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  fs::path path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using TempDir = exocet_mosaic::testing::TempDir;
 
 /// The vent without attenuation (its radiance is the same from every camera) seen by a ring of six 640x480 cameras;
 /// its surface from their exact depth maps; a seventh camera, between two of the ring and higher, is the ground truth.
@@ -389,7 +376,7 @@ TEST_F(VentTexturing, ObjExportReferencesTheAtlasWithCoordinatesInTheUnitSquare)
   const TexturedMesh textured = mesh::textureSurface(part, *views_, config, &stats);
   EXPECT_NEAR(stats.atlas_scale, 0.5, 1e-12);
   const TempDir dir;
-  const std::string obj = (dir.path() / "surface.obj").string();
+  const std::string obj = dir.file("surface.obj");
   const std::string png = exocet_stereo::io::writeObj(obj, textured);
   ASSERT_EQ(fs::path(png).filename(), "surface.png");
   const cv::Mat atlas = cv::imread(png, cv::IMREAD_UNCHANGED);
@@ -398,7 +385,7 @@ TEST_F(VentTexturing, ObjExportReferencesTheAtlasWithCoordinatesInTheUnitSquare)
   EXPECT_EQ(atlas.rows, stats.atlas_height_px);
   EXPECT_LE(std::max(atlas.cols, atlas.rows), 2 * 640);
 
-  std::ifstream mtl((dir.path() / "surface.mtl").string());
+  std::ifstream mtl(dir.file("surface.mtl"));
   std::string text((std::istreambuf_iterator<char>(mtl)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("map_Kd surface.png"), std::string::npos) << text;
   std::ifstream in(obj);
@@ -467,13 +454,13 @@ TEST_F(VentTexturing, ReconstructPairsTexturesItsSurfaceAndWritesTheAtlas) {
   EXPECT_LT(error, 4.0 * kMedianErrorBound);  // measured 5.6: lower resolution, SGM geometry
 
   const TempDir dir;
-  const std::vector<std::string> files = mesh::writeReconstruction(result, dir.path().string());
-  EXPECT_NE(std::find(files.begin(), files.end(), (dir.path() / "surface.png").string()), files.end());
-  EXPECT_FALSE(cv::imread((dir.path() / "surface.png").string()).empty());
-  std::ifstream ply((dir.path() / "surface.ply").string());
+  const std::vector<std::string> files = mesh::writeReconstruction(result, dir.path());
+  EXPECT_NE(std::find(files.begin(), files.end(), dir.file("surface.png")), files.end());
+  EXPECT_FALSE(cv::imread(dir.file("surface.png")).empty());
+  std::ifstream ply(dir.file("surface.ply"));
   std::string text((std::istreambuf_iterator<char>(ply)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("comment TextureFile surface.png"), std::string::npos);
-  std::ifstream wrl((dir.path() / "surface.wrl").string());
+  std::ifstream wrl(dir.file("surface.wrl"));
   std::string vrml((std::istreambuf_iterator<char>(wrl)), std::istreambuf_iterator<char>());
   EXPECT_NE(vrml.find("ImageTexture { url \"surface.png\" }"), std::string::npos);
 
