@@ -224,6 +224,39 @@ TEST(ComposePlacement, LazyImagesGiveTheSameTileAndOnlyTheDrawnOnesAreDecoded) {
   EXPECT_LE(loads, composed + 120 / config.lighting.sample_interval_frames + 1);
 }
 
+TEST(ComposePlacement, TheLightingFieldObservesTheKeyFramesWithoutDecodingMore) {
+  // Key frames are decoded to be drawn: the lighting field observes them, and no image is decoded for the field alone
+  // while key frames come more often than sample_interval_frames.
+  FrameFactory factory = makeFactory(truth(), 0.0);
+  ec::ComposerConfig config = baseConfig();
+  config.lighting.enabled = true;
+  config.lighting.sample_interval_frames = 25;
+  config.frames_per_mosaic = 1000;  // one mosaic: no image is drawn twice
+  ec::MosaicComposer lazy(config);
+  int loads = 0;
+  std::vector<ec::ClosedMosaic> tiles;
+  for (int i = 0; i < 120; ++i) {
+    const ec::ComposerFrame frame = factory.frame(i);
+    ec::ComposerFrame deferred = frame;
+    deferred.image = cv::Mat();
+    deferred.image_size = frame.image.size();
+    deferred.image_channels = frame.image.channels();
+    deferred.load_image = [image = frame.image, &loads]() {
+      ++loads;
+      return image.clone();
+    };
+    if (auto t = lazy.add(deferred)) tiles.push_back(*t);
+  }
+  if (auto t = lazy.flush()) tiles.push_back(*t);
+  ASSERT_EQ(tiles.size(), 1u);
+  const int composed = tiles[0].frames_composed;
+  const int observed = lazy.lighting().framesUsed() + lazy.lighting().framesRejected();
+  std::printf("lighting: %d decodes, %d drawn, %d observed by the field\n", loads, composed, observed);
+  ASSERT_GT(composed, 120 / 25 + 2);  // key frames come more often than the interval
+  EXPECT_EQ(loads, composed);         // every decode is drawn
+  EXPECT_GE(observed, composed - 1);  // and observed (but the last, drawn when the mosaic is flushed)
+}
+
 TEST(ComposePlacement, AnImageThatCannotBeLoadedIsSkippedAndSaid) {
   FrameFactory factory = makeFactory(truth(), 0.0);
   ec::ComposerConfig config = baseConfig();

@@ -526,6 +526,58 @@ TEST(TilesGeoTiff, FullDiskGivesAClearErrorAndNoFile) {
   std::cout << "[ info     ] " << tile.error << "\n";
 }
 
+TEST(TilesGeoTiff, OverviewsAverageTheDataAndIgnoreTheNoDataColour) {
+  // The overviews are filled from memory: each pixel of the first level is the mean colour of the pixels with data in
+  // its 2x2 block (GDAL's AVERAGE with a mask) and the mean alpha; the colour under no-data never leaks in.
+  TempDir dir;
+  GeoTiffTileWriter writer(configFor(dir.path()));
+  const TileRaster raster = makeRaster(1200, 900, 31, true, 500000.0, 4800000.0, 0.05);  // colour under no-data too
+  const WrittenTile tile = writer.write(raster, makeMetadata());
+  ASSERT_TRUE(tile.ok) << tile.error;
+  DatasetPtr tif = openDataset(tile.geotiff_path);
+  ASSERT_TRUE(tif);
+  ASSERT_EQ(tif->GetRasterBand(1)->GetOverviewCount(), 3);  // 600, 300, 150 px wide: down to a 256 px block
+  GDALRasterBand* first_level = tif->GetRasterBand(1)->GetOverview(0);
+  ASSERT_EQ(first_level->GetXSize(), 600);
+  ASSERT_EQ(first_level->GetYSize(), 450);
+  std::vector<cv::Mat> levels;
+  for (int band = 1; band <= 4; ++band) {
+    cv::Mat out(450, 600, CV_8UC1);
+    ASSERT_EQ(tif->GetRasterBand(band)->GetOverview(0)->RasterIO(GF_Read, 0, 0, 600, 450, out.data, 600, 450, GDT_Byte,
+                                                                 0, 0, nullptr),
+              CE_None);
+    levels.push_back(out);
+  }
+  int checked_full = 0, checked_edge = 0, worst_colour = 0, worst_alpha = 0;
+  for (int y = 0; y < 450; ++y) {
+    for (int x = 0; x < 600; ++x) {
+      double sum[3] = {0, 0, 0};
+      int valid = 0;
+      for (int dy = 0; dy < 2; ++dy) {
+        for (int dx = 0; dx < 2; ++dx) {
+          if (!raster.mask.at<uchar>(2 * y + dy, 2 * x + dx)) continue;
+          const cv::Vec3b bgr = raster.image.at<cv::Vec3b>(2 * y + dy, 2 * x + dx);
+          for (int c = 0; c < 3; ++c) sum[c] += bgr[2 - c];  // bands are R, G, B
+          ++valid;
+        }
+      }
+      worst_alpha = std::max(worst_alpha, std::abs(levels[3].at<uchar>(y, x) - static_cast<int>(std::lround(
+                                                                                    255.0 * valid / 4.0))));
+      if (valid == 0) continue;
+      for (int c = 0; c < 3; ++c)
+        worst_colour =
+            std::max(worst_colour, std::abs(levels[c].at<uchar>(y, x) - static_cast<int>(std::lround(sum[c] / valid))));
+      ++(valid == 4 ? checked_full : checked_edge);
+    }
+  }
+  std::printf("overview: %d full and %d edge pixels, worst colour error %d, worst alpha error %d\n", checked_full,
+              checked_edge, worst_colour, worst_alpha);
+  EXPECT_GT(checked_edge, 100);
+  EXPECT_LE(worst_alpha, 1);
+  // The premultiplied 8-bit average rounds twice: a pixel covered by one of four carries up to 255 / 64 of it.
+  EXPECT_LE(worst_colour, 4);
+}
+
 TEST(TilesGeoTiff, CogAndKmzOpenWithTheRightBounds) {
   TempDir dir;
   TileWriterConfig config = configFor(dir.path());

@@ -109,6 +109,7 @@ struct MosaicComposer::Impl {
   bool previous_in_chain = false;  // the previous add() put its image into the open mosaic's chain
   ContinuityTie tie;
   double last_height_m = 0;
+  int frames_since_lighting_sample = 0;  // images added since the lighting field last observed one
 };
 
 MosaicComposer::MosaicComposer(const ComposerConfig& config) : config_(config) {
@@ -289,11 +290,22 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     frame.image = loadImage(frame.load_image, image_size, image_channels, frame.index, &s.stats.last_problem);
     return !frame.image.empty();
   };
-  const bool lighting_sample =
-      config_.lighting.enabled && (s.stats.frames_added - 1) % config_.lighting.sample_interval_frames == 0;
+  // The lighting field observes every image decoded anyway (key frames, the first image of a mosaic), before it is
+  // corrected, and when none came for sample_interval_frames images one more is decoded for it: decoding is the
+  // composer's main cost, and moving key frames are the decorrelated samples of the seabed the average needs.
+  bool lighting_observed = false;
+  auto observeLighting = [&]() {
+    if (!config_.lighting.enabled || lighting_observed || frame.image.empty()) return;
+    s.lighting.observe(frame.image);
+    s.frames_since_lighting_sample = 0;
+    lighting_observed = true;
+  };
+  ++s.frames_since_lighting_sample;
+  const bool lighting_due =
+      config_.lighting.enabled && s.frames_since_lighting_sample >= config_.lighting.sample_interval_frames;
   // A frame that starts a mosaic is drawn: load it now, before any state changes.
-  if ((lighting_sample || !s.open) && !materialize()) return skip(s.stats.last_problem);
-  if (lighting_sample) s.lighting.observe(frame.image);
+  if ((lighting_due || !s.open) && !materialize()) return skip(s.stats.last_problem);
+  if (lighting_due || !s.open) observeLighting();
 
   // The pose's ground projection, relative to the open mosaic's origin (or absolute UTM when none is open).
   const Eigen::Vector2d origin = s.open ? s.open->ref_en_m : Eigen::Vector2d::Zero();
@@ -366,8 +378,10 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
       ++s.stats.navigation_jumps;
       std::optional<ClosedMosaic> closed = closeMosaic("navigation_jump");
       s.tie.valid = false;  // the navigation moved: start afresh at the new pose
-      if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame) && materialize())
+      if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame) && materialize()) {
+        observeLighting();
         startMosaic(frame, false);
+      }
       return closed;
     } else {
       point = p;
@@ -391,7 +405,10 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
   s.previous_in_chain = true;
   if (isKeyFrame(m, chain, size, config_.min_key_frame_shift_fraction)) {
     // A key frame whose image cannot be loaded is left out; the chain (from the registration) goes on.
-    if (materialize()) composeImage(m, frame.image, chain, config_, s.lighting, s.feather, s.stats);
+    if (materialize()) {
+      observeLighting();
+      composeImage(m, frame.image, chain, config_, s.lighting, s.feather, s.stats);
+    }
   } else {
     m.pending = true;
     m.pending_chain = chain;
@@ -415,7 +432,10 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     reason = "memory";
   if (reason.empty()) return std::nullopt;
   std::optional<ClosedMosaic> closed = closeMosaic(reason);
-  if (materialize()) startMosaic(frame, true);  // the image also starts the next mosaic: consecutive tiles overlap
+  if (materialize()) {  // the image also starts the next mosaic: consecutive tiles overlap
+    observeLighting();
+    startMosaic(frame, true);
+  }
   return closed;
 }
 

@@ -67,6 +67,7 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readTopic("image_topic", &c.image_topic);
   p.readString("transport", &c.transport, {"auto", "raw", "compressed"},
                "image topic: raw (image_transport), compressed (<image_topic>/compressed) or auto");
+  p.readInt("queue_size", &c.queue_size, 1, 1000, "images waiting to be composed");
   c.camera_info_topic = image_transport::getCameraInfoTopic(c.image_topic);
   p.readTopic("camera_info_topic", &c.camera_info_topic);
   p.readTopic("motion_topic", &c.motion_topic);

@@ -59,13 +59,16 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   preview_pub_ = image_transport_.advertise(config_.preview_topic, 1);
 
   if (config_.transport != "compressed")
-    raw_sub_ = image_transport_.subscribe(config_.image_topic, 200, &TileWriterRos::onImage, this,
+    raw_sub_ = image_transport_.subscribe(config_.image_topic, config_.queue_size, &TileWriterRos::onImage, this,
                                           image_transport::TransportHints("raw"));
   if (config_.transport != "raw")
-    compressed_sub_ = nh_.subscribe(config_.image_topic + "/compressed", 200, &TileWriterRos::onCompressed, this);
-  motion_sub_ = nh_.subscribe(config_.motion_topic, 500, &TileWriterRos::onMotion, this);
-  odometry_sub_ = nh_.subscribe(config_.odometry_topic, 500, &TileWriterRos::onOdometry, this);
-  height_sub_ = nh_.subscribe(config_.camera_height_topic, 500, &TileWriterRos::onCameraHeight, this);
+    compressed_sub_ =
+        nh_.subscribe(config_.image_topic + "/compressed", config_.queue_size, &TileWriterRos::onCompressed, this);
+  // One motion, pose and height per image: their queues are at least as deep as the images'.
+  const int per_image_queue = std::max(500, config_.queue_size);
+  motion_sub_ = nh_.subscribe(config_.motion_topic, per_image_queue, &TileWriterRos::onMotion, this);
+  odometry_sub_ = nh_.subscribe(config_.odometry_topic, per_image_queue, &TileWriterRos::onOdometry, this);
+  height_sub_ = nh_.subscribe(config_.camera_height_topic, per_image_queue, &TileWriterRos::onCameraHeight, this);
   datum_sub_ = nh_.subscribe(config_.datum_topic, 1, &TileWriterRos::onDatum, this);
   camera_info_sub_ = nh_.subscribe(config_.camera_info_topic, 5, &TileWriterRos::onCameraInfo, this);
 

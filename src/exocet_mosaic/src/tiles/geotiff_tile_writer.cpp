@@ -27,6 +27,7 @@
 #include <gdalwarper.h>
 #include <ogr_spatialref.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "exocet_mosaic/fusion/utm_grid.h"
 #include "exocet_mosaic/tiles/tile_json.h"
@@ -368,6 +369,65 @@ class TileFiles {
   std::vector<Entry> entries_;
 };
 
+/// Overview factors 2, 4, ... down to about one block, or none for a tile small enough to open without them.
+std::vector<int> overviewLevels(int width, int height, int block_size_px) {
+  std::vector<int> levels;
+  if (std::max(width, height) <= kOverviewThresholdPx) return levels;
+  for (int level = 2;; level *= 2) {
+    levels.push_back(level);
+    if ((std::max(width, height) + level - 1) / level <= block_size_px) break;
+  }
+  return levels;
+}
+
+/**
+ * Fills the overviews (created empty) of a GeoTIFF whose last band is an alpha band, from its pixels in memory
+ * (`pixels`: the file's band order, interleaved, CV_8UC(bands)). Each level is the area average of the one above,
+ * colour weighted by alpha (GDAL's AVERAGE with a mask): GDAL would instead read the whole tile back and decompress it,
+ * which took as long as writing it.
+ */
+void writeOverviewsFromMemory(GDALDataset* dataset, const cv::Mat& pixels, const std::string& path,
+                              GdalErrorCollector* errors) {
+  const int bands = pixels.channels();
+  const int alpha_band = bands - 1;
+  // Premultiplied by alpha (8 bits: the rounding only shows at the partly covered edge pixels), so that no-data
+  // pixels do not darken the edges of the overviews; each level is then an area average of the one above.
+  cv::Mat level(pixels.size(), pixels.type());
+  for (int y = 0; y < pixels.rows; ++y) {
+    const uchar* in = pixels.ptr<uchar>(y);
+    uchar* out = level.ptr<uchar>(y);
+    for (int x = 0; x < pixels.cols; ++x, in += bands, out += bands) {
+      const int a = in[alpha_band];
+      for (int c = 0; c < alpha_band; ++c) out[c] = a == 255 ? in[c] : static_cast<uchar>((in[c] * a + 127) / 255);
+      out[alpha_band] = static_cast<uchar>(a);
+    }
+  }
+  GDALRasterBand* first = dataset->GetRasterBand(1);
+  cv::Mat smaller, out;
+  for (int i = 0; i < first->GetOverviewCount(); ++i) {
+    GDALRasterBand* overview_band = first->GetOverview(i);
+    GDALDataset* overview = overview_band ? overview_band->GetDataset() : nullptr;
+    if (!overview || overview->GetRasterCount() != bands)
+      throw TileWriteError("cannot fill overview " + std::to_string(i) + " of '" + path + "': no overview dataset");
+    const cv::Size size(overview->GetRasterXSize(), overview->GetRasterYSize());
+    cv::resize(level, smaller, size, 0, 0, cv::INTER_AREA);
+    cv::swap(level, smaller);
+    // Back to straight colour (GDAL's AVERAGE with a mask: the mean of the pixels with data).
+    level.copyTo(out);
+    for (int y = 0; y < out.rows; ++y) {
+      uchar* p = out.ptr<uchar>(y);
+      for (int x = 0; x < out.cols; ++x, p += bands) {
+        const int a = p[alpha_band];
+        if (a == 255 || a == 0) continue;
+        for (int c = 0; c < alpha_band; ++c) p[c] = static_cast<uchar>(std::min(255, (p[c] * 255 + a / 2) / a));
+      }
+    }
+    if (overview->RasterIO(GF_Write, 0, 0, size.width, size.height, out.data, size.width, size.height, GDT_Byte, bands,
+                           nullptr, bands, static_cast<GSpacing>(out.step), 1, nullptr) != CE_None)
+      throw TileWriteError("cannot write overview " + std::to_string(i) + " of '" + path + "': " + errors->take());
+  }
+}
+
 /// Writes the GeoTIFF itself to `path`: pixels in RGB(A) band order, georeferencing, metadata, overviews.
 void writeGeoTiff(const TileWriterConfig& config, const TileRaster& raster, const TileMetadata& metadata,
                   const WrittenTile& tile, const std::string& path, GdalErrorCollector* errors) {
@@ -425,7 +485,12 @@ void writeGeoTiff(const TileWriterConfig& config, const TileRaster& raster, cons
   }
   if (errors->failed()) throw TileWriteError("cannot set up GeoTIFF '" + path + "': " + errors->take());
 
-  // One row of blocks at a time, all bands interleaved as the file stores them: each block is compressed once.
+  // One row of blocks at a time, all bands interleaved as the file stores them: each block is compressed once. With
+  // an alpha band the interleaved pixels are kept whole, for the overviews.
+  const std::vector<int> levels = overviewLevels(width, height, config.block_size_px);
+  const bool overviews_from_memory = !jpeg && !levels.empty();
+  cv::Mat pixels;
+  if (overviews_from_memory) pixels.create(height, width, CV_8UC(bands));
   const int strip_rows = config.block_size_px;
   cv::Mat strip, alpha;
   for (int row = 0; row < height; row += strip_rows) {
@@ -437,7 +502,10 @@ void writeGeoTiff(const TileWriterConfig& config, const TileRaster& raster, cons
     } else {
       cv::compare(raster.mask(roi), 0, alpha, cv::CMP_NE);  // any nonzero mask value is data: alpha 255
     }
-    strip.create(rows, width, CV_8UC(bands));
+    if (overviews_from_memory)
+      strip = pixels(roi);
+    else
+      strip.create(rows, width, CV_8UC(bands));
     if (colour) {
       // OpenCV's BGR to the file's RGB(A).
       const cv::Mat sources[] = {image, alpha};
@@ -460,16 +528,16 @@ void writeGeoTiff(const TileWriterConfig& config, const TileRaster& raster, cons
     }
   }
 
-  if (std::max(width, height) > kOverviewThresholdPx) {
-    std::vector<int> levels;
-    for (int level = 2;; level *= 2) {
-      levels.push_back(level);
-      if ((std::max(width, height) + level - 1) / level <= config.block_size_px) break;
-    }
-    if (GDALBuildOverviews(GDALDataset::ToHandle(dataset.get()), "AVERAGE", static_cast<int>(levels.size()),
-                           levels.data(), 0, nullptr, nullptr, nullptr) != CE_None) {
+  if (!levels.empty()) {
+    // "NONE" creates the overviews without computing them: they are filled from memory (JPEG: GDAL's AVERAGE, which
+    // also handles the internal mask).
+    std::vector<int> factors = levels;
+    if (GDALBuildOverviews(GDALDataset::ToHandle(dataset.get()), overviews_from_memory ? "NONE" : "AVERAGE",
+                           static_cast<int>(factors.size()), factors.data(), 0, nullptr, nullptr, nullptr) != CE_None) {
       throw TileWriteError("cannot build the overviews of '" + path + "': " + errors->take());
     }
+    if (overviews_from_memory) writeOverviewsFromMemory(dataset.get(), pixels, path, errors);
+    if (errors->failed()) throw TileWriteError("cannot write the overviews of '" + path + "': " + errors->take());
   }
   dataset.reset();  // flushes and closes: write errors of the last blocks show up here
   if (errors->failed()) throw TileWriteError("cannot write GeoTIFF '" + path + "': " + errors->take());

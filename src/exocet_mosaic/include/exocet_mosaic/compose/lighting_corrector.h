@@ -33,9 +33,10 @@ struct LightingConfig {
   /// An image darker on average than this fraction of the field's mean (lamps off, turbidity, the camera in the
   /// water column) does not update the field, [0, 1].
   double min_relative_brightness = 0.3;
-  /// The composer feeds every n-th image to the field estimate, [1, 1000]: images 1/25 s apart are near duplicates,
-  /// and the downsampling is the composer's main cost per image that is not composed.
-  int sample_interval_frames = 5;
+  /// The composer feeds the field every image it decodes anyway (key frames, a mosaic's first image) and decodes one
+  /// more when none came for this many images, [1, 1000]: images 1/25 s apart are near duplicates, and decoding an
+  /// image that is not composed is the composer's main cost for it. 25: one a second at 25 images/s while hovering.
+  int sample_interval_frames = 25;
 
   /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
   std::string validate() const;

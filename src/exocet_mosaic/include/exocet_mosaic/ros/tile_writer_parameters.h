@@ -21,6 +21,9 @@ struct TileWriterNodeConfig {
   // Inputs.
   std::string image_topic = "/camera/image_raw";
   std::string transport = "auto";  ///< raw | compressed | auto (the first that delivers)
+  /// Subscriber queue of the images [1, 1000] (the motions, poses and heights get at least 500): a replay's images
+  /// wait here while a burst of key frames (a U-turn) is composed.
+  int queue_size = 200;
   std::string camera_info_topic;   ///< default: next to image_topic
   std::string motion_topic = "/mosaic/motion";
   std::string odometry_topic = "/mosaic/odometry";
