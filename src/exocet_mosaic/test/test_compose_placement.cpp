@@ -276,8 +276,12 @@ TEST(ComposePlacement, AnImageThatCannotBeLoadedIsSkippedAndSaid) {
       frame.load_image = [image]() { return image; };
     }
     composer.add(frame);
-    if (i == 10) EXPECT_NE(composer.stats().last_problem.find("corrupt JPEG"), std::string::npos);
-    if (i == 20) EXPECT_NE(composer.stats().last_problem.find("announced"), std::string::npos);
+    if (i == 10) {
+      EXPECT_NE(composer.stats().last_problem.find("corrupt JPEG"), std::string::npos);
+    }
+    if (i == 20) {
+      EXPECT_NE(composer.stats().last_problem.find("announced"), std::string::npos);
+    }
   }
   const auto tile = composer.flush();
   ASSERT_TRUE(tile);

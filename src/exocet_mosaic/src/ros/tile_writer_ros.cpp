@@ -462,9 +462,9 @@ void TileWriterRos::onTimer() {
     ready = assembler_.popReady(ros::WallTime::now().toSec());
   }
   processReady(std::move(ready));
-  static ros::WallTime last_preview;
-  if (config_.preview_period_s > 0.0 && (ros::WallTime::now() - last_preview).toSec() >= config_.preview_period_s) {
-    last_preview = ros::WallTime::now();
+  if (config_.preview_period_s > 0.0 &&
+      (ros::WallTime::now() - last_preview_wall_).toSec() >= config_.preview_period_s) {
+    last_preview_wall_ = ros::WallTime::now();
     publishPreview();
   }
   if (config_.exit_when_idle_s > 0.0 && received_input_ && !shutting_down_ &&

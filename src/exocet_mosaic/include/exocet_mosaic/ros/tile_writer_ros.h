@@ -114,6 +114,7 @@ class TileWriterRos {
   bool northern_ = true;
   std::optional<Eigen::Vector2d> map_origin_en_m_;
   ros::WallTime last_input_wall_;
+  ros::WallTime last_preview_wall_;  // per instance: several tile writers (nodelets) can share a process
   bool received_input_ = false;
   bool shutting_down_ = false;
 
