@@ -1,0 +1,148 @@
+// The tile network adjustment: tiles cut from a known ortho-image and written with known georeference errors are
+// measured pair by pair and moved back into agreement; the adjusted copies carry the moved georeference.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <gdal_priv.h>
+#include <sys/stat.h>
+
+#include "compose_fixtures.h"
+#include "exocet_mosaic/testing/temp_dir.h"
+#include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_network_adjustment.h"
+
+namespace et = exocet_mosaic::tiles;
+using TempDir = exocet_mosaic::testing::TempDir;
+
+namespace {
+
+constexpr double kGsd = 0.005;
+
+struct PlantedTile {
+  cv::Rect truth_px;         // the tile's pixels in the truth ortho-image
+  Eigen::Vector2d error_m;   // written georeference minus the true one
+};
+
+/// Writes the tiles: crops of the truth, their origins off by error_m, the left 20 columns no data.
+std::vector<std::string> writeTiles(const compose_test::TruthOrtho& truth, const std::vector<PlantedTile>& planted,
+                                    const std::string& folder) {
+  et::TileWriterConfig config;
+  config.output_dir = folder;
+  et::GeoTiffTileWriter writer(config);
+  std::vector<std::string> paths;
+  for (const PlantedTile& p : planted) {
+    et::TileRaster raster;
+    raster.image = truth.image(p.truth_px).clone();
+    raster.mask = cv::Mat(raster.image.size(), CV_8UC1, cv::Scalar(255));
+    raster.mask.colRange(0, 20).setTo(0);
+    raster.gsd_m = kGsd;
+    raster.origin_easting_m = truth.origin_e_m + p.truth_px.x * kGsd + p.error_m.x();
+    raster.origin_northing_m = truth.origin_n_m - p.truth_px.y * kGsd + p.error_m.y();
+    raster.utm_zone = 31;
+    et::TileMetadata metadata;
+    metadata.extra["position_sigma_m"] = "0.05";
+    const et::WrittenTile tile = writer.write(raster, metadata);
+    EXPECT_TRUE(tile.ok) << tile.error;
+    paths.push_back(tile.geotiff_path);
+  }
+  return paths;
+}
+
+std::vector<PlantedTile> fourTilesTwoLines() {
+  // Two "lines" of two tiles; the second line (a return pass) off by 2-4 cm from the first, as a USBL would put it.
+  return {{cv::Rect(0, 0, 700, 450), Eigen::Vector2d(0.004, -0.002)},
+          {cv::Rect(450, 0, 700, 450), Eigen::Vector2d(0.006, 0.001)},
+          {cv::Rect(0, 300, 700, 450), Eigen::Vector2d(-0.021, 0.030)},
+          {cv::Rect(450, 300, 700, 450), Eigen::Vector2d(-0.018, 0.033)}};
+}
+
+}  // namespace
+
+TEST(TilesAdjustment, OverlappingTilesAreMovedBackIntoAgreement) {
+  const compose_test::TruthOrtho truth =
+      compose_test::TruthOrtho::make(1150 * kGsd, 750 * kGsd, kGsd, 500000.0, 4800000.0);
+  TempDir live, adjusted;
+  const std::vector<PlantedTile> planted = fourTilesTwoLines();
+  const std::vector<std::string> paths = writeTiles(truth, planted, live.path());
+  ASSERT_EQ(paths.size(), 4u);
+
+  et::TileAdjustmentResult result = et::measureAndSolve(paths, et::TileAdjustmentConfig());
+  ASSERT_TRUE(result.ok) << result.error;
+  ASSERT_EQ(result.tiles.size(), 4u);
+  EXPECT_EQ(result.pairs.size(), 6u);  // every pair overlaps (the diagonal ones by 250 x 150 px)
+  Eigen::Vector2d mean_shift = Eigen::Vector2d::Zero();
+  for (const auto& t : result.tiles) {
+    EXPECT_NEAR(t.position_sigma_m, 0.05, 1e-9);
+    mean_shift += t.shift_en_m / 4.0;
+  }
+  for (const auto& p : result.pairs) {
+    const Eigen::Vector2d planted_offset = planted[p.b].error_m - planted[p.a].error_m;
+    // Whole 256 px patches measure to a tenth of a pixel; the diagonal pairs' small overlaps (64 px patches) less well.
+    EXPECT_LT((p.offset_en_m - planted_offset).norm(), (p.patch_px >= 256 ? 0.2 : 1.0) * kGsd)
+        << "pair " << p.a << "-" << p.b << ": measured " << p.offset_en_m.transpose() << ", planted "
+        << planted_offset.transpose();
+    // After the adjustment the tiles agree (the small overlaps weigh less): what remains is the measurement noise.
+    const Eigen::Vector2d after = (planted[p.b].error_m + result.tiles[p.b].shift_en_m) -
+                                  (planted[p.a].error_m + result.tiles[p.a].shift_en_m);
+    EXPECT_LT(after.norm(), 0.25 * kGsd) << "pair " << p.a << "-" << p.b;
+    std::printf("pair %d-%d: planted %.2f px apart, measured to %.3f px, %.3f px after (%d patches)\n", p.a, p.b,
+                planted_offset.norm() / kGsd, (p.offset_en_m - planted_offset).norm() / kGsd, after.norm() / kGsd,
+                p.patches);
+  }
+  // Equal navigation sigmas: the network as a whole stays where the navigation put it.
+  EXPECT_LT(mean_shift.norm(), 1e-3);
+
+  et::writeAdjustedTiles(adjusted.path(), &result);
+  ASSERT_TRUE(result.ok) << result.error;
+  ASSERT_EQ(result.written.size(), 4u);
+  GDALAllRegister();
+  for (size_t i = 0; i < 4; ++i) {
+    std::unique_ptr<GDALDataset> moved(GDALDataset::Open(result.written[i].c_str(), GDAL_OF_RASTER));
+    std::unique_ptr<GDALDataset> original(GDALDataset::Open(paths[i].c_str(), GDAL_OF_RASTER));
+    ASSERT_TRUE(moved && original);
+    double gt_moved[6], gt_original[6];
+    moved->GetGeoTransform(gt_moved);
+    original->GetGeoTransform(gt_original);
+    EXPECT_NEAR(gt_moved[0] - gt_original[0], result.tiles[i].shift_en_m.x(), 1e-9);
+    EXPECT_NEAR(gt_moved[3] - gt_original[3], result.tiles[i].shift_en_m.y(), 1e-9);
+    EXPECT_EQ(gt_moved[1], gt_original[1]);
+    ASSERT_NE(moved->GetMetadataItem("EXOCET_ADJUSTMENT_E_M"), nullptr);
+    EXPECT_NEAR(std::stod(moved->GetMetadataItem("EXOCET_ADJUSTMENT_E_M")), result.tiles[i].shift_en_m.x(), 1e-9);
+    EXPECT_STREQ(moved->GetMetadataItem("EXOCET_POSITION_SIGMA_M"), original->GetMetadataItem("EXOCET_POSITION_SIGMA_M"));
+    // The world file beside it locates the centre of the moved top-left pixel.
+    const std::string world = result.written[i].substr(0, result.written[i].size() - 4) + ".tfw";
+    std::ifstream in(world);
+    double w[6];
+    for (double& v : w) in >> v;
+    ASSERT_TRUE(in) << world;
+    EXPECT_NEAR(w[4], gt_moved[0] + 0.5 * kGsd, 1e-6);
+    EXPECT_NEAR(w[5], gt_moved[3] - 0.5 * kGsd, 1e-6);
+  }
+  // Nothing is overwritten: a second run into the same folder fails and says so.
+  et::TileAdjustmentResult again = et::measureAndSolve(paths, et::TileAdjustmentConfig());
+  et::writeAdjustedTiles(adjusted.path(), &again);
+  EXPECT_FALSE(again.ok);
+  EXPECT_NE(again.error.find("exists"), std::string::npos) << again.error;
+}
+
+TEST(TilesAdjustment, BadInputIsNamed) {
+  TempDir dir;
+  const std::string not_a_tile = dir.path() + "/tile_0000.tif";
+  std::ofstream(not_a_tile) << "not a GeoTIFF";
+  const et::TileAdjustmentResult result = et::measureAndSolve({not_a_tile}, et::TileAdjustmentConfig());
+  EXPECT_FALSE(result.ok);
+  EXPECT_NE(result.error.find(not_a_tile), std::string::npos) << result.error;
+
+  et::TileAdjustmentConfig config;
+  config.patch_px = 100;
+  const et::TileAdjustmentResult invalid = et::measureAndSolve({}, config);
+  EXPECT_FALSE(invalid.ok);
+  EXPECT_NE(invalid.error.find("patch_px must be a power of two in [32, 1024], got 100"), std::string::npos)
+      << invalid.error;
+}
