@@ -711,6 +711,10 @@ int GeoTiffTileWriter::removeStaleTemporaries() const {
 }
 
 WrittenTile GeoTiffTileWriter::write(const TileRaster& raster, const TileMetadata& metadata) {
+  return writeAt(raster, metadata, -1);
+}
+
+WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetadata& metadata, int index) {
   const auto start = std::chrono::steady_clock::now();
   WrittenTile tile;
   tile.metadata = metadata;
@@ -740,7 +744,7 @@ WrittenTile GeoTiffTileWriter::write(const TileRaster& raster, const TileMetadat
   }
   if (!S_ISDIR(st.st_mode)) return finish("output folder '" + config_.output_dir + "' is not a folder");
 
-  tile.index = nextIndex();
+  tile.index = index >= 0 ? index : nextIndex();
   const std::string base = baseName(tile.index);
   registerGdalOnce();
   GdalErrorCollector errors;

@@ -7,12 +7,17 @@
 #include <cstring>
 #include <fstream>
 #include <memory>
+#include <regex>
 #include <sstream>
+
+#include <climits>
+#include <cstdlib>
 
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <Eigen/LU>
 #include <Eigen/Sparse>
 #include <cpl_conv.h>
 #include <cpl_error.h>
@@ -21,6 +26,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_json.h"
 
 namespace exocet_mosaic {
@@ -120,9 +126,11 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
     cv::GaussianBlur(*grey, low, cv::Size(0, 0), 12.0);
     *grey -= low;
   }
-  // Phase correlation of the patches wholly inside both masks (a mask edge pulls the shift to zero); the shifts of
-  // the patches that agree with their median.
-  auto measurePatches = [&](const cv::Mat& b_grey, int p, std::vector<cv::Point2d>* shifts) {
+  // Phase correlation of the patches wholly inside both masks (a mask edge pulls the shift to zero).
+  struct PatchShift {
+    cv::Point2d centre_px, shift_px;
+  };
+  auto measurePatches = [&](const cv::Mat& b_grey, int p, std::vector<PatchShift>* shifts) {
     cv::Mat hann;
     cv::createHanningWindow(hann, cv::Size(p, p), CV_32F);
     shifts->clear();
@@ -135,7 +143,7 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
         if (min_a < 255 || min_b < 255) continue;
         double response = 0;
         const cv::Point2d s = cv::phaseCorrelate(grey_a(r), b_grey(r), hann, &response);
-        if (response >= config.min_response) shifts->push_back(s);
+        if (response >= config.min_response) shifts->push_back({cv::Point2d(x + 0.5 * p, y + 0.5 * p), s});
       }
     }
   };
@@ -143,24 +151,27 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
     std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
     return v[v.size() / 2];
   };
-  auto agreeingMean = [&](const std::vector<cv::Point2d>& shifts, cv::Point2d* mean, int* count, double* spread) {
+  // The patches that agree with the median shift (a patch on a moving fish or a featureless patch does not), their
+  // mean, and the median distance from the median.
+  auto agreeing = [&](const std::vector<PatchShift>& shifts, std::vector<PatchShift>* kept, cv::Point2d* mean,
+                      double* spread) {
+    kept->clear();
     if (static_cast<int>(shifts.size()) < config.min_patches) return false;
     std::vector<double> xs, ys, distances;
-    for (const auto& s : shifts) xs.push_back(s.x), ys.push_back(s.y);
+    for (const auto& s : shifts) xs.push_back(s.shift_px.x), ys.push_back(s.shift_px.y);
     const cv::Point2d m(median(xs), median(ys));
     *mean = cv::Point2d(0, 0);
-    *count = 0;
     for (const auto& s : shifts) {
-      distances.push_back(cv::norm(s - m));
-      if (cv::norm(s - m) <= config.max_patch_spread_px) *mean += s, ++*count;
+      distances.push_back(cv::norm(s.shift_px - m));
+      if (cv::norm(s.shift_px - m) <= config.max_patch_spread_px) kept->push_back(s), *mean += s.shift_px;
     }
-    if (*count < config.min_patches) return false;
-    *mean *= 1.0 / *count;
+    if (static_cast<int>(kept->size()) < config.min_patches) return false;
+    *mean *= 1.0 / kept->size();
     *spread = median(distances);
     return true;
   };
   // Overlaps of adjacent lines are strips: smaller patches there (a patch holds shifts up to a quarter of its side).
-  std::vector<cv::Point2d> shifts;
+  std::vector<PatchShift> shifts, kept;
   int patch = 0;
   for (int p = config.patch_px; p >= 64 || p == config.patch_px; p /= 2) {
     if (width < p || height < p) continue;
@@ -169,37 +180,125 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
     if (static_cast<int>(shifts.size()) >= config.min_patches) break;
   }
   cv::Point2d mean;
-  int count = 0;
   double spread = 0;
-  if (!agreeingMean(shifts, &mean, &count, &spread)) return false;
-  // The sub-pixel peak of a phase correlation is biased away from whole pixels (up to ~0.3 px): b resampled by the
-  // estimate, the residual shift is near zero, where the peak is unbiased.
+  if (!agreeing(shifts, &kept, &mean, &spread)) return false;
+  // The sub-pixel peak of a phase correlation is biased away from whole pixels (up to ~0.3 px): with b resampled by
+  // the mean shift the patches' residual shifts are near zero, where the peak is unbiased.
   for (int iteration = 0; iteration < 2; ++iteration) {
     const cv::Matx23d back(1, 0, mean.x, 0, 1, mean.y);  // b's window sampled at (x + dx, y + dy)
     cv::Mat shifted;
     cv::warpAffine(grey_b, shifted, back, grey_b.size(), cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT);
-    measurePatches(shifted, patch, &shifts);
+    std::vector<PatchShift> residuals, residuals_kept;
+    measurePatches(shifted, patch, &residuals);
     cv::Point2d residual;
-    int residual_count = 0;
     double residual_spread = 0;
     // A residual beyond the bias means the resampled patches no longer agree (a small overlap): keep the estimate.
-    if (!agreeingMean(shifts, &residual, &residual_count, &residual_spread) || cv::norm(residual) > 0.5) break;
+    if (!agreeing(residuals, &residuals_kept, &residual, &residual_spread) || cv::norm(residual) > 0.5) break;
+    for (auto& r : residuals_kept) r.shift_px += mean;
+    kept = residuals_kept;
     mean += residual;
-    count = residual_count;
   }
   // A feature at window pixel (x, y) of a is at (x + dx, y + dy) of b's window; b's window starts at its own UTM corner.
   const double window_b_e = b.origin_easting_m + col_b * g, window_b_n = b.origin_northing_m - row_b * g;
-  pair->offset_en_m = Eigen::Vector2d(window_b_e - window_e + mean.x * g, window_b_n - window_n - mean.y * g);
-  pair->patches = count;
+  auto offsetOf = [&](const cv::Point2d& s) {
+    return Eigen::Vector2d(window_b_e - window_e + s.x * g, window_b_n - window_n - s.y * g);
+  };
+  pair->offset_en_m = offsetOf(mean);
+  pair->patches = static_cast<int>(kept.size());
   pair->patch_px = patch;
   pair->spread_px = spread;
+  for (const auto& k : kept) {
+    PatchOffset o;
+    o.centre_en_m = Eigen::Vector2d(window_e + k.centre_px.x * g, window_n - k.centre_px.y * g);
+    o.offset_en_m = offsetOf(k.shift_px);
+    o.patch_px = patch;
+    pair->patch_offsets.push_back(o);
+  }
   return true;
 }
 
-bool linkNoReplace(const std::string& from, const std::string& to) {
-  if (::link(from.c_str(), to.c_str()) != 0) return false;
-  ::unlink(from.c_str());
-  return true;
+
+/// The UTM zone and hemisphere of a WGS 84 UTM / UPS EPSG code (326zz, 327zz, 32661, 32761), or false.
+bool zoneOfEpsg(int epsg, int* zone, bool* northern) {
+  if (epsg == 32661 || epsg == 32761) {
+    *zone = 0;
+    *northern = epsg == 32661;
+    return true;
+  }
+  if (epsg > 32600 && epsg <= 32660) return *zone = epsg - 32600, *northern = true, true;
+  if (epsg > 32700 && epsg <= 32760) return *zone = epsg - 32700, *northern = false, true;
+  return false;
+}
+
+/// The tile resampled north-up after its adjustment, on a grid of the same GSD holding every moved pixel. Colour is
+/// interpolated premultiplied by alpha (no dark fringe at the no-data edge); alpha >= 128 is data.
+std::string resampleTile(const AdjustedTile& tile, GDALDataset* dataset, TileRaster* raster) {
+  const int bands = dataset->GetRasterCount();
+  const int colour_bands = bands - 1;
+  if (colour_bands != 1 && colour_bands != 3) return "'" + tile.path + "' has " + std::to_string(bands) + " bands";
+  cv::Mat pixels(tile.height_px, tile.width_px, CV_8UC(bands));
+  if (dataset->RasterIO(GF_Read, 0, 0, tile.width_px, tile.height_px, pixels.data, tile.width_px, tile.height_px,
+                        GDT_Byte, bands, nullptr, bands, static_cast<GSpacing>(pixels.step), 1, nullptr) != CE_None)
+    return "cannot read the pixels of '" + tile.path + "': " + CPLGetLastErrorMsg();
+  for (int y = 0; y < pixels.rows; ++y) {
+    uchar* p = pixels.ptr<uchar>(y);
+    for (int x = 0; x < pixels.cols; ++x, p += bands)
+      for (int c = 0; c < colour_bands; ++c) p[c] = static_cast<uchar>((p[c] * p[colour_bands] + 127) / 255);
+  }
+  const double g = tile.gsd_m;
+  // Source pixel (x, y) has its centre at (E0 + (x + 0.5) g, N0 - (y + 0.5) g).
+  double e_min = 1e300, e_max = -1e300, n_min = 1e300, n_max = -1e300;
+  for (const double x : {0.0, static_cast<double>(tile.width_px)}) {
+    for (const double y : {0.0, static_cast<double>(tile.height_px)}) {
+      const Eigen::Vector2d q = tile.moved(Eigen::Vector2d(tile.origin_easting_m + x * g, tile.origin_northing_m - y * g));
+      e_min = std::min(e_min, q.x()), e_max = std::max(e_max, q.x());
+      n_min = std::min(n_min, q.y()), n_max = std::max(n_max, q.y());
+    }
+  }
+  // The new grid: the old one moved by the shift, widened to whole pixels around the moved corners.
+  const double grid_e = tile.origin_easting_m + tile.shift_en_m.x(), grid_n = tile.origin_northing_m + tile.shift_en_m.y();
+  const double origin_e = grid_e + g * std::floor((e_min - grid_e) / g);
+  const double origin_n = grid_n + g * std::ceil((n_max - grid_n) / g);
+  const cv::Size size(static_cast<int>(std::ceil((e_max - origin_e) / g - 1e-6)),
+                      static_cast<int>(std::ceil((origin_n - n_min) / g - 1e-6)));
+  // Output pixel (u, v) -> its UTM centre -> back through the adjustment (a similarity: its inverse is affine) ->
+  // source pixel. Three points give the affine map.
+  const Eigen::Matrix2d m = (Eigen::Matrix2d() << 1.0 + tile.scale_change, -tile.rotation_rad, tile.rotation_rad,
+                             1.0 + tile.scale_change).finished();
+  const Eigen::Matrix2d m_inverse = m.inverse();
+  auto sourceOf = [&](double u, double v) {
+    const Eigen::Vector2d q(origin_e + (u + 0.5) * g, origin_n - (v + 0.5) * g);
+    const Eigen::Vector2d p = tile.centre_en_m + m_inverse * (q - tile.shift_en_m - tile.centre_en_m);
+    return Eigen::Vector2d((p.x() - tile.origin_easting_m) / g - 0.5, (tile.origin_northing_m - p.y()) / g - 0.5);
+  };
+  const Eigen::Vector2d s0 = sourceOf(0, 0), su = sourceOf(1, 0) - s0, sv = sourceOf(0, 1) - s0;
+  const cv::Matx23d map(su.x(), sv.x(), s0.x(), su.y(), sv.y(), s0.y());
+  cv::Mat warped;
+  cv::warpAffine(pixels, warped, map, size, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_CONSTANT,
+                 cv::Scalar::all(0));
+  cv::Mat colour(size, CV_8UC(colour_bands)), mask(size, CV_8UC1);
+  for (int y = 0; y < size.height; ++y) {
+    const uchar* w = warped.ptr<uchar>(y);
+    uchar* c = colour.ptr<uchar>(y);
+    uchar* k = mask.ptr<uchar>(y);
+    for (int x = 0; x < size.width; ++x, w += bands, c += colour_bands) {
+      const int alpha = w[colour_bands];
+      k[x] = alpha >= 128 ? 255 : 0;
+      for (int b = 0; b < colour_bands; ++b) {
+        // The file's R, G, B to OpenCV's B, G, R.
+        const int value = alpha > 0 ? std::min(255, (w[b] * 255 + alpha / 2) / alpha) : 0;
+        c[colour_bands == 3 ? 2 - b : b] = static_cast<uchar>(alpha >= 128 ? value : 0);
+      }
+    }
+  }
+  raster->image = colour;
+  raster->mask = mask;
+  raster->origin_easting_m = origin_e;
+  raster->origin_northing_m = origin_n;
+  raster->gsd_m = g;
+  if (!zoneOfEpsg(tile.epsg, &raster->utm_zone, &raster->northern_hemisphere))
+    return "'" + tile.path + "' is in EPSG:" + std::to_string(tile.epsg) + ", not a WGS 84 UTM / UPS zone";
+  return "";
 }
 
 }  // namespace
@@ -214,8 +313,10 @@ std::string TileAdjustmentConfig::validate() const {
     bad.push_back("min_response must be in [0, 1], got " + std::to_string(min_response));
   if (!(max_patch_spread_px > 0.0 && max_patch_spread_px <= 100.0))
     bad.push_back("max_patch_spread_px must be in (0, 100], got " + std::to_string(max_patch_spread_px));
-  if (!(pair_sigma_px > 0.0 && pair_sigma_px <= 100.0))
-    bad.push_back("pair_sigma_px must be in (0, 100], got " + std::to_string(pair_sigma_px));
+  if (!(patch_sigma_px > 0.0 && patch_sigma_px <= 100.0))
+    bad.push_back("patch_sigma_px must be in (0, 100], got " + std::to_string(patch_sigma_px));
+  if (!(rotation_scale_sigma > 0.0 && rotation_scale_sigma <= 1.0))
+    bad.push_back("rotation_scale_sigma must be in (0, 1], got " + std::to_string(rotation_scale_sigma));
   if (!(default_position_sigma_m > 0.0 && default_position_sigma_m <= 1000.0))
     bad.push_back("default_position_sigma_m must be in (0, 1000], got " + std::to_string(default_position_sigma_m));
   std::string out;
@@ -250,39 +351,67 @@ TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, cons
       if (measurePair(a, b, config, &pair)) result.pairs.push_back(pair);
     }
   }
-  // Least squares, each axis alike: sum over pairs of w (t_b - t_a + offset)^2 plus sum over tiles of (t_i / sigma_i)^2.
+  // Least squares over the 4 unknowns of each tile (shift E, N, scale, rotation): every patch's offset, after the
+  // adjustment, is zero (weighed by the patch's area: a phase correlation's variance falls with it); the shifts within
+  // the navigation's 1-sigma; rotation and scale within rotation_scale_sigma.
+  for (AdjustedTile& t : result.tiles)
+    t.centre_en_m = Eigen::Vector2d(t.origin_easting_m + 0.5 * t.width_px * t.gsd_m,
+                                    t.origin_northing_m - 0.5 * t.height_px * t.gsd_m);
   if (n > 0) {
-    Eigen::SparseMatrix<double> h(n, n);
     std::vector<Eigen::Triplet<double>> entries;
-    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(n, 2);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(4 * n);
+    const double rs_weight = 1.0 / (config.rotation_scale_sigma * config.rotation_scale_sigma);
     for (int i = 0; i < n; ++i) {
       const double s = result.tiles[i].position_sigma_m;
-      entries.emplace_back(i, i, 1.0 / (s * s));
+      entries.emplace_back(4 * i, 4 * i, 1.0 / (s * s));
+      entries.emplace_back(4 * i + 1, 4 * i + 1, 1.0 / (s * s));
+      entries.emplace_back(4 * i + 2, 4 * i + 2, rs_weight);
+      entries.emplace_back(4 * i + 3, 4 * i + 3, rs_weight);
     }
+    // d(moved p) / d(shift E, shift N, scale, rotation) at p.
+    auto jacobian = [&](int tile, const Eigen::Vector2d& p) {
+      const Eigen::Vector2d d = p - result.tiles[tile].centre_en_m;
+      Eigen::Matrix<double, 2, 4> j;
+      j << 1, 0, d.x(), -d.y(), 0, 1, d.y(), d.x();
+      return j;
+    };
     for (const TilePairOffset& p : result.pairs) {
-      // pair_sigma_px is the offset's 1-sigma from the overlap of two patch_px patches; a phase correlation's
-      // variance falls with the area correlated, so a strip of small patches weighs less than a long overlap.
-      const double sigma_m = config.pair_sigma_px * result.tiles[p.a].gsd_m;
-      const double area = static_cast<double>(p.patches) * p.patch_px * p.patch_px /
-                           (2.0 * config.patch_px * config.patch_px);
-      const double w = area / (sigma_m * sigma_m);
-      entries.emplace_back(p.a, p.a, w);
-      entries.emplace_back(p.b, p.b, w);
-      entries.emplace_back(p.a, p.b, -w);
-      entries.emplace_back(p.b, p.a, -w);
-      rhs.row(p.b) -= w * p.offset_en_m.transpose();
-      rhs.row(p.a) += w * p.offset_en_m.transpose();
+      const double g = result.tiles[p.a].gsd_m;
+      for (const PatchOffset& o : p.patch_offsets) {
+        const double sigma_m = config.patch_sigma_px * g * config.patch_px / o.patch_px;
+        const double w = 1.0 / (sigma_m * sigma_m);
+        Eigen::Matrix<double, 2, 8> jac;  // residual = offset + J_b q_b - J_a q_a
+        jac << -jacobian(p.a, o.centre_en_m), jacobian(p.b, o.centre_en_m);
+        const Eigen::Matrix<double, 8, 8> jtj = w * jac.transpose() * jac;
+        const Eigen::Matrix<double, 8, 1> jtr = w * jac.transpose() * o.offset_en_m;
+        const int base[2] = {4 * p.a, 4 * p.b};
+        for (int r = 0; r < 8; ++r) {
+          rhs(base[r / 4] + r % 4) -= jtr(r);
+          for (int c = 0; c < 8; ++c) entries.emplace_back(base[r / 4] + r % 4, base[c / 4] + c % 4, jtj(r, c));
+        }
+      }
     }
+    Eigen::SparseMatrix<double> h(4 * n, 4 * n);
     h.setFromTriplets(entries.begin(), entries.end());
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(h);
     if (solver.info() != Eigen::Success) {
       result.error = "the tile network's normal equations cannot be factored";
       return result;
     }
-    const Eigen::MatrixXd t = solver.solve(rhs);
-    for (int i = 0; i < n; ++i) result.tiles[i].shift_en_m = t.row(i).transpose();
-    for (TilePairOffset& p : result.pairs)
-      p.residual_en_m = p.offset_en_m + result.tiles[p.b].shift_en_m - result.tiles[p.a].shift_en_m;
+    const Eigen::VectorXd q = solver.solve(rhs);
+    for (int i = 0; i < n; ++i) {
+      result.tiles[i].shift_en_m = q.segment<2>(4 * i);
+      result.tiles[i].scale_change = q(4 * i + 2);
+      result.tiles[i].rotation_rad = q(4 * i + 3);
+    }
+    for (TilePairOffset& p : result.pairs) {
+      p.residual_en_m.setZero();
+      for (const PatchOffset& o : p.patch_offsets) {
+        const Eigen::Vector2d r = o.offset_en_m + (result.tiles[p.b].moved(o.centre_en_m) - o.centre_en_m) -
+                                  (result.tiles[p.a].moved(o.centre_en_m) - o.centre_en_m);
+        if (r.norm() > p.residual_en_m.norm()) p.residual_en_m = r;
+      }
+    }
   }
   result.ok = true;
   return result;
@@ -295,67 +424,52 @@ void writeAdjustedTiles(const std::string& output_dir, TileAdjustmentResult* res
     result->error = "output folder '" + output_dir + "' is not an existing folder";
     return;
   }
+  const std::regex tile_name(R"((.+)_([0-9]{4,})\.tif)");
   for (const AdjustedTile& tile : result->tiles) {
-    const std::string name = baseName(tile.path);
-    const std::string final_path = output_dir + "/" + name;
-    const std::string temporary = output_dir + "/." + name + ".partial";
     auto fail = [&](const std::string& why) {
-      ::unlink(temporary.c_str());
       result->ok = false;
       result->error = why;
     };
-    if (::stat(final_path.c_str(), &st) == 0) return fail("'" + final_path + "' exists: not overwritten");
-    if (final_path == tile.path) return fail("the output folder is the tiles' own: '" + output_dir + "'");
-    {
-      std::ifstream in(tile.path, std::ios::binary);
-      std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-      out << in.rdbuf();
-      out.flush();
-      if (!in || !out) return fail("cannot copy '" + tile.path + "' to '" + temporary + "': " + std::strerror(errno));
+    const std::string name = baseName(tile.path);
+    std::smatch match;
+    if (!std::regex_match(name, match, tile_name)) return fail("'" + tile.path + "' is not named <prefix>_NNNN.tif");
+    const std::string folder = tile.path.substr(0, tile.path.size() - name.size());
+    char resolved_in[PATH_MAX], resolved_out[PATH_MAX];
+    if (::realpath((folder.empty() ? "." : folder).c_str(), resolved_in) &&
+        ::realpath(output_dir.c_str(), resolved_out) && std::string(resolved_in) == resolved_out)
+      return fail("the output folder is the tiles' own: '" + output_dir + "'");
+    DatasetPtr dataset = openTile(tile.path, false);
+    if (!dataset) return fail("cannot open '" + tile.path + "': " + CPLGetLastErrorMsg());
+    TileRaster raster;
+    const std::string why = resampleTile(tile, dataset.get(), &raster);
+    if (!why.empty()) return fail(why);
+    // The live tile's metadata, but what the writer sets itself, and the adjustment.
+    TileMetadata metadata;
+    char** items = dataset->GetMetadata();
+    for (int i = 0; items && items[i]; ++i) {
+      const std::string item = items[i];
+      const auto eq = item.find('=');
+      if (eq == std::string::npos) continue;
+      const std::string key = item.substr(0, eq);
+      if (key == "TIFFTAG_DATETIME" || key == "TIFFTAG_SOFTWARE" || key == "AREA_OR_POINT" || key == "EXOCET_GSD_M")
+        continue;
+      metadata.extra[key] = item.substr(eq + 1);
     }
-    {
-      CPLErrorReset();
-      DatasetPtr dataset = openTile(temporary, true);
-      if (!dataset) return fail("cannot open '" + temporary + "' for update: " + CPLGetLastErrorMsg());
-      double gt[6];
-      dataset->GetGeoTransform(gt);
-      gt[0] += tile.shift_en_m.x();
-      gt[3] += tile.shift_en_m.y();
-      dataset->SetGeoTransform(gt);
-      dataset->SetMetadataItem("EXOCET_ADJUSTMENT_E_M", jsonNumber(tile.shift_en_m.x()).c_str());
-      dataset->SetMetadataItem("EXOCET_ADJUSTMENT_N_M", jsonNumber(tile.shift_en_m.y()).c_str());
-      dataset.reset();
-      if (CPLGetLastErrorType() >= CE_Failure) return fail("cannot update '" + temporary + "': " + CPLGetLastErrorMsg());
-    }
-    const int fd = ::open(temporary.c_str(), O_RDONLY);
-    if (fd >= 0) {
-      ::fsync(fd);
-      ::close(fd);
-    }
-    // The world file locates the centre of the top-left pixel.
-    const double g = tile.gsd_m;
-    std::string world;
-    for (const double v : {g, 0.0, 0.0, -g, tile.origin_easting_m + tile.shift_en_m.x() + 0.5 * g,
-                           tile.origin_northing_m + tile.shift_en_m.y() - 0.5 * g})
-      world += jsonNumber(v) + "\n";
-    const std::string world_name = name.substr(0, name.rfind('.')) + ".tfw";
-    const std::string world_temporary = output_dir + "/." + world_name + ".partial";
-    {
-      std::ofstream out(world_temporary, std::ios::trunc);
-      out << world;
-      out.flush();
-      if (!out) {
-        ::unlink(world_temporary.c_str());
-        return fail("cannot write '" + world_temporary + "': " + std::strerror(errno));
-      }
-    }
-    if (!linkNoReplace(world_temporary, output_dir + "/" + world_name)) {
-      ::unlink(world_temporary.c_str());
-      return fail("cannot rename '" + world_temporary + "': " + std::strerror(errno));
-    }
-    if (!linkNoReplace(temporary, final_path))
-      return fail("cannot rename '" + temporary + "' to '" + final_path + "': " + std::strerror(errno));
-    result->written.push_back(final_path);
+    metadata.extra["EXOCET_ADJUSTMENT_E_M"] = jsonNumber(tile.shift_en_m.x());
+    metadata.extra["EXOCET_ADJUSTMENT_N_M"] = jsonNumber(tile.shift_en_m.y());
+    metadata.extra["EXOCET_ADJUSTMENT_ROTATION_RAD"] = jsonNumber(tile.rotation_rad);
+    metadata.extra["EXOCET_ADJUSTMENT_SCALE"] = jsonNumber(tile.scale_change);
+    TileWriterConfig config;
+    config.output_dir = output_dir;
+    config.prefix = match[1].str();
+    const char* compression = dataset->GetMetadataItem("COMPRESSION", "IMAGE_STRUCTURE");
+    const std::string c = compression ? compression : "NONE";
+    config.compression = c == "YCbCr JPEG" ? "JPEG" : (c == "DEFLATE" || c == "LZW" || c == "JPEG") ? c : "DEFLATE";
+    dataset.reset();
+    GeoTiffTileWriter writer(config);
+    const WrittenTile written = writer.writeAt(raster, metadata, std::stoi(match[2].str()));
+    if (!written.ok) return fail(written.error);
+    result->written.push_back(written.geotiff_path);
   }
 }
 

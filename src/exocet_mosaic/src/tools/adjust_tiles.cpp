@@ -1,6 +1,6 @@
-// adjust_tiles: after the dive, moves the tiles so that overlapping ones agree (the return passes with the outbound
-// ones), keeping the network where the navigation put it (tiles/tile_network_adjustment.h). The live tiles are kept;
-// the adjusted copies go to another folder.
+// adjust_tiles: after the dive, moves the tiles by one similarity each so that overlapping ones agree (the return
+// passes with the outbound ones), keeping the network where the navigation put it (tiles/tile_network_adjustment.h).
+// The live tiles are kept; the adjusted ones go to another folder.
 //   rosrun exocet_mosaic adjust_tiles --tiles DIR --output DIR [--report FILE.json] [--patch-px N]
 // Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.
 #include <algorithm>
@@ -22,11 +22,12 @@ namespace {
 namespace et = exocet_mosaic::tiles;
 
 const char kUsage[] =
-    "usage: adjust_tiles --tiles DIR --output DIR [--report FILE.json] [--patch-px N] [--pair-sigma-px S]\n"
+    "usage: adjust_tiles --tiles DIR --output DIR [--report FILE.json] [--patch-px N] [--patch-sigma-px S]\n"
     "Registers every pair of overlapping tiles (<prefix>_NNNN.tif in DIR, as the tile writer names them) and moves\n"
-    "each by one translation so that they agree, weighed against each tile's navigation 1-sigma\n"
-    "(EXOCET_POSITION_SIGMA_M). Writes the moved copies (same pixels, overviews, metadata, new georeference, .tfw)\n"
-    "into the output folder, which must exist and differ from DIR; nothing is overwritten.\n";
+    "each by one similarity (shift, rotation, scale) so that they agree, weighed against each tile's navigation\n"
+    "1-sigma (EXOCET_POSITION_SIGMA_M). Writes the tiles resampled north-up (same names, GSD, compression and\n"
+    "metadata, plus EXOCET_ADJUSTMENT_*; .tfw) into the output folder, which must exist and differ from DIR;\n"
+    "nothing is overwritten.\n";
 
 int usage(const std::string& why) {
   std::cerr << "adjust_tiles: " << why << "\n" << kUsage;
@@ -49,8 +50,8 @@ int main(int argc, char** argv) {
       report = value();
     else if (arg == "--patch-px")
       config.patch_px = std::atoi(value().c_str());
-    else if (arg == "--pair-sigma-px")
-      config.pair_sigma_px = std::atof(value().c_str());
+    else if (arg == "--patch-sigma-px")
+      config.patch_sigma_px = std::atof(value().c_str());
     else if (arg == "-h" || arg == "--help") {
       std::cout << kUsage;
       return 0;
@@ -87,9 +88,10 @@ int main(int argc, char** argv) {
               "after\n",
               result.tiles.size(), result.pairs.size(), worst_before, worst_after);
   for (const auto& t : result.tiles)
-    std::printf("  %s: moved %+.4f m E, %+.4f m N (navigation 1-sigma %.3f m)\n",
+    std::printf("  %s: moved %+.4f m E, %+.4f m N, rotated %+.2f mrad, scaled %+.2f permille (navigation 1-sigma "
+                "%.3f m)\n",
                 std::filesystem::path(t.path).filename().c_str(), t.shift_en_m.x(), t.shift_en_m.y(),
-                t.position_sigma_m);
+                1e3 * t.rotation_rad, 1e3 * t.scale_change, t.position_sigma_m);
   et::writeAdjustedTiles(output_dir, &result);
   if (!report.empty()) {
     std::ofstream out(report);

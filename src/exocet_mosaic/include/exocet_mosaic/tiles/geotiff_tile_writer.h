@@ -67,6 +67,9 @@ class GeoTiffTileWriter {
    * @param metadata written as GeoTIFF metadata items and copied into the result
    */
   WrittenTile write(const TileRaster& raster, const TileMetadata& metadata);
+  /// As write(), under a given index (a negative one: nextIndex()); fails, writing nothing, when one of its final
+  /// names exists (the rename never replaces a file).
+  WrittenTile writeAt(const TileRaster& raster, const TileMetadata& metadata, int index);
 
   /// Removes the temporaries left in output_dir by a killed writer of this prefix (".<prefix>_*.partial*"); call it
   /// at start-up, when no other writer of this folder and prefix runs. Returns how many files it removed.

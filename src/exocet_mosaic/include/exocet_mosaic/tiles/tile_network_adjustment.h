@@ -3,11 +3,13 @@
  * @brief After the dive: moves the written tiles so that overlapping ones agree, the return passes with the outbound
  * ones. The live tiles are placed by the live fused track, whose error between passes (USBL) is several centimetres:
  * two passes over the same seabed show it as a seam of 5-15 px. Here every pair of overlapping tiles is registered
- * in its overlap (phase correlation of patches, median), and one translation per tile is solved by least squares:
- * the pairs' offsets (tight) against each tile's navigation position (its 1-sigma, EXOCET_POSITION_SIGMA_M), so that
- * the network as a whole stays where the navigation put it. The adjusted tiles are copies (same pixels, overviews and
- * metadata) with the moved georeference, their world files and EXOCET_ADJUSTMENT_E_M / _N_M; the live tiles are kept.
- * No ROS in it.
+ * in its overlap (phase correlation of band-passed patches, refined by resampling), and one similarity per tile
+ * (translation, rotation and scale about its centre: the live placement fits each tile's own) is solved by least
+ * squares: the patches' offsets (tight) against each tile's navigation position (its 1-sigma,
+ * EXOCET_POSITION_SIGMA_M) and a weak prior on rotation and scale, so that the network as a whole stays where the
+ * navigation put it. The adjusted tiles are resampled north-up at the same ground sample distance and written by
+ * GeoTiffTileWriter under the same names (world file, overviews, the live metadata plus EXOCET_ADJUSTMENT_*) in another
+ * folder; the live tiles are kept. No ROS in it.
  */
 #pragma once
 
@@ -25,7 +27,9 @@ struct TileAdjustmentConfig {
   int min_patches = 2;               ///< patches a pair needs to be measured, [1, 1000]
   double min_response = 0.1;         ///< phase correlation peak a patch needs, [0, 1]
   double max_patch_spread_px = 2.0;  ///< patches further than this from their median are outliers, (0, 100]
-  double pair_sigma_px = 0.5;        ///< 1-sigma of an offset measured on two patch_px patches, (0, 100]
+  double patch_sigma_px = 0.5;       ///< 1-sigma of one patch_px patch's offset (smaller patches: more), (0, 100]
+  /// Prior 1-sigma of a tile's rotation (rad) and scale change (fraction), (0, 1]: weak, the overlaps decide.
+  double rotation_scale_sigma = 0.01;
   /// A tile without EXOCET_POSITION_SIGMA_M gets this navigation 1-sigma (m), (0, 1000].
   double default_position_sigma_m = 0.1;
   /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
@@ -41,7 +45,24 @@ struct AdjustedTile {
   double origin_northing_m = 0.0;
   int width_px = 0, height_px = 0;
   double position_sigma_m = 0.0;     ///< navigation 1-sigma of its placement
-  Eigen::Vector2d shift_en_m = Eigen::Vector2d::Zero();  ///< the adjustment: add to the origin
+  /// The adjustment, a point p of the tile goes to p + shift + [scale -rotation; rotation scale] (p - centre).
+  Eigen::Vector2d centre_en_m = Eigen::Vector2d::Zero();
+  Eigen::Vector2d shift_en_m = Eigen::Vector2d::Zero();
+  double rotation_rad = 0.0;
+  double scale_change = 0.0;
+  /// Where the adjustment moves p (UTM, m).
+  Eigen::Vector2d moved(const Eigen::Vector2d& p) const {
+    const Eigen::Vector2d d = p - centre_en_m;
+    return p + shift_en_m + Eigen::Vector2d(scale_change * d.x() - rotation_rad * d.y(),
+                                            rotation_rad * d.x() + scale_change * d.y());
+  }
+};
+
+/// One patch of an overlap: at centre_en_m (as tile a places it), b's content lies offset_en_m from a's.
+struct PatchOffset {
+  Eigen::Vector2d centre_en_m = Eigen::Vector2d::Zero();
+  Eigen::Vector2d offset_en_m = Eigen::Vector2d::Zero();
+  int patch_px = 0;
 };
 
 /// The measured disagreement of two overlapping tiles: b's content lies offset_en_m from a's (b minus a).
@@ -51,7 +72,9 @@ struct TilePairOffset {
   int patches = 0;                   ///< patches that agreed
   int patch_px = 0;                  ///< their side (smaller in a narrow overlap)
   double spread_px = 0.0;            ///< median distance of the patches' offsets from their median
-  Eigen::Vector2d residual_en_m = Eigen::Vector2d::Zero();  ///< after the adjustment (b minus a)
+  std::vector<PatchOffset> patch_offsets;  ///< the agreeing patches
+  /// After the adjustment (b minus a), the largest over the patches.
+  Eigen::Vector2d residual_en_m = Eigen::Vector2d::Zero();
 };
 
 /// What adjustTiles() did.
@@ -65,15 +88,17 @@ struct TileAdjustmentResult {
 
 /**
  * @brief Reads the tiles (GeoTIFFs written by GeoTiffTileWriter: colour or grey bands and an alpha band), measures
- * every overlapping pair of the same EPSG and GSD, and solves one translation per tile.
+ * every overlapping pair of the same EPSG and GSD, and solves one similarity per tile.
  * @param paths  the live GeoTIFFs
  */
 TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config);
 
 /**
- * @brief Writes the adjusted copies of result's tiles into output_dir (an existing folder other than theirs): the
- * same file name, the moved georeference, a world file beside each. Each file is written under a temporary name and
- * renamed; an existing file is not overwritten (error). Sets result->written, or ok = false and error.
+ * @brief Writes the adjusted tiles into output_dir (an existing folder other than theirs): each tile resampled
+ * (bilinear, alpha-weighted) north-up on a grid of the same GSD that holds all its moved pixels, under the same name
+ * (<prefix>_NNNN), with the same compression, its world file and overviews; metadata: the live tile's plus
+ * EXOCET_ADJUSTMENT_E_M, _N_M, _ROTATION_RAD, _SCALE. Nothing is overwritten (error). Sets result->written, or
+ * ok = false and error.
  */
 void writeAdjustedTiles(const std::string& output_dir, TileAdjustmentResult* result);
 
