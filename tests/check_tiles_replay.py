@@ -149,6 +149,36 @@ class TilesReplayTest(unittest.TestCase):
         self.assertGreaterEqual(len(errors), 2)
         # Global placement comes from the fused navigation: a few of its sigmas.
         self.assertLess(max(errors), max(3.0 * sigma_m, 0.05))
+
+        # After the dive: adjust_tiles moves the overlapping tiles into agreement; the adjusted set covers the same
+        # track and keeps the landmarks within the same bound.
+        adjusted_dir = os.path.join(output_dir, 'adjusted')
+        os.makedirs(adjusted_dir)
+        done = subprocess.run(['rosrun', 'exocet_mosaic', 'adjust_tiles', '--tiles', output_dir, '--output',
+                               adjusted_dir], capture_output=True, text=True, timeout=300)
+        self.assertEqual(done.returncode, 0, done.stderr + done.stdout)
+        adjusted = [Tile(p) for p in sorted(glob.glob(os.path.join(adjusted_dir, '*_[0-9][0-9][0-9][0-9].tif')))]
+        self.assertEqual(len(adjusted), len(tiles))
+        for t in adjusted:
+            self.assertEqual(t.epsg, epsg)
+            self.assertEqual((t.geotransform[2], t.geotransform[4]), (0.0, 0.0), 'north-up')
+            self.assertIn('EXOCET_ADJUSTMENT_E_M', t.metadata)
+        covered = sum(any(t.has_data_at(float(r['cam_easting_m']), float(r['cam_northing_m'])) for t in adjusted)
+                      for r in truth[5:])
+        self.assertGreater(covered / float(len(truth) - 5), 0.95)
+        adjusted_errors = []
+        for mark in landmarks:
+            e, n, size = float(mark['easting_m']), float(mark['northing_m']), float(mark['size_m'])
+            for t in adjusted:
+                if t.has_data_at(e, n):
+                    found = find_checker_saddle(t, e, n, size, search_m=0.5)
+                    self.assertIsNotNone(found, 'landmark %s is seen in the adjusted %s' % (mark['id'], t.path))
+                    adjusted_errors.append(math.hypot(found[0] - e, found[1] - n))
+        print('tiles replay, adjusted: %s; landmark error median %.3f m, max %.3f m' % (
+            done.stdout.splitlines()[0] if done.stdout else '', float(np.median(adjusted_errors)),
+            max(adjusted_errors)))
+        self.assertGreaterEqual(len(adjusted_errors), 2)
+        self.assertLess(max(adjusted_errors), max(3.0 * sigma_m, 0.05))
         shutil.rmtree(output_dir, ignore_errors=True)  # passed: the tiles (tens of MB) are not kept
 
     def check_rviz_view(self, truth, truth_paths, published):

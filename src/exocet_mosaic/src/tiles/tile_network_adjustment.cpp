@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <regex>
@@ -322,6 +323,21 @@ std::string TileAdjustmentConfig::validate() const {
   std::string out;
   for (const auto& b : bad) out += (out.empty() ? "" : "; ") + b;
   return out;
+}
+
+std::vector<std::string> listTiles(const std::string& folder, std::string* error) {
+  std::vector<std::string> paths;
+  std::error_code ec;
+  const std::regex tile_name(R"([A-Za-z0-9_.\-]+_[0-9]{4,}\.tif)");
+  for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && name[0] != '.' && std::regex_match(name, tile_name) &&
+        name.find(".cog.tif") == std::string::npos)
+      paths.push_back(entry.path().string());
+  }
+  if (ec && error) *error = "cannot list '" + folder + "': " + ec.message();
+  std::sort(paths.begin(), paths.end());
+  return paths;
 }
 
 TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config) {

@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -62,16 +61,10 @@ int main(int argc, char** argv) {
   const std::string invalid = config.validate();
   if (!invalid.empty()) return usage(invalid);
 
-  std::vector<std::string> paths;
-  std::error_code ec;
-  const std::regex tile_name(R"([A-Za-z0-9_.\-]+_[0-9]{4}\.tif)");
-  for (const auto& entry : std::filesystem::directory_iterator(tiles_dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (entry.is_regular_file() && std::regex_match(name, tile_name)) paths.push_back(entry.path().string());
-  }
-  if (ec) return usage("cannot list '" + tiles_dir + "': " + ec.message());
+  std::string list_error;
+  const std::vector<std::string> paths = et::listTiles(tiles_dir, &list_error);
+  if (!list_error.empty()) return usage(list_error);
   if (paths.empty()) return usage("no tile (<prefix>_NNNN.tif) in '" + tiles_dir + "'");
-  std::sort(paths.begin(), paths.end());
 
   et::TileAdjustmentResult result = et::measureAndSolve(paths, config);
   if (!result.ok) {

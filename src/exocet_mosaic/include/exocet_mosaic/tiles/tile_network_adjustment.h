@@ -86,6 +86,10 @@ struct TileAdjustmentResult {
   std::vector<std::string> written;   ///< paths of the adjusted GeoTIFFs
 };
 
+/// The tiles of a folder as the tile writer names them (<prefix>_NNNN.tif, not the .cog.tif copies), sorted; empty
+/// when there are none or the folder cannot be read (*error says why, if given).
+std::vector<std::string> listTiles(const std::string& folder, std::string* error = nullptr);
+
 /**
  * @brief Reads the tiles (GeoTIFFs written by GeoTiffTileWriter: colour or grey bands and an alpha band), measures
  * every overlapping pair of the same EPSG and GSD, and solves one similarity per tile.
