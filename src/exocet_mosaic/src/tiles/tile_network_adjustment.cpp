@@ -172,17 +172,19 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
     return true;
   };
   // Overlaps of adjacent lines are strips: smaller patches there (a patch holds shifts up to a quarter of its side).
+  // Too few patches, or patches that disagree (a small shared footprint, mostly mask edge): smaller ones.
   std::vector<PatchShift> shifts, kept;
   int patch = 0;
-  for (int p = config.patch_px; p >= 64 || p == config.patch_px; p /= 2) {
+  cv::Point2d mean;
+  double spread = 0;
+  bool measured = false;
+  for (int p = config.patch_px; (p >= 64 || p == config.patch_px) && !measured; p /= 2) {
     if (width < p || height < p) continue;
     measurePatches(grey_b, p, &shifts);
     patch = p;
-    if (static_cast<int>(shifts.size()) >= config.min_patches) break;
+    measured = agreeing(shifts, &kept, &mean, &spread);
   }
-  cv::Point2d mean;
-  double spread = 0;
-  if (!agreeing(shifts, &kept, &mean, &spread)) return false;
+  if (!measured) return false;
   // The sub-pixel peak of a phase correlation is biased away from whole pixels (up to ~0.3 px): with b resampled by
   // the mean shift the patches' residual shifts are near zero, where the peak is unbiased.
   for (int iteration = 0; iteration < 2; ++iteration) {

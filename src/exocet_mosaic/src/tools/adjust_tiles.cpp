@@ -95,7 +95,17 @@ int main(int argc, char** argv) {
       out << (i ? ", " : "") << "\"" << std::filesystem::path(result.tiles[i].path).filename().string() << "\": ["
           << et::jsonNumber(result.tiles[i].shift_en_m.x()) << ", " << et::jsonNumber(result.tiles[i].shift_en_m.y())
           << "]";
-    out << "}\n}\n";
+    out << "},\n  \"pair_list\": [";
+    for (size_t i = 0; i < result.pairs.size(); ++i) {
+      const auto& p = result.pairs[i];
+      const double g = result.tiles[p.a].gsd_m;
+      out << (i ? ",\n    " : "\n    ") << "{\"a\": \"" << std::filesystem::path(result.tiles[p.a].path).filename().string()
+          << "\", \"b\": \"" << std::filesystem::path(result.tiles[p.b].path).filename().string()
+          << "\", \"patches\": " << p.patches << ", \"patch_px\": " << p.patch_px
+          << ", \"offset_px\": " << et::jsonNumber(p.offset_en_m.norm() / g)
+          << ", \"residual_px\": " << et::jsonNumber(p.residual_en_m.norm() / g) << "}";
+    }
+    out << "]\n}\n";
   }
   if (!result.ok) {
     std::cerr << "adjust_tiles: " << result.error << "\n";
