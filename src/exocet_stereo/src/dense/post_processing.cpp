@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -71,6 +72,32 @@ cv::Mat leftRightCheck(const cv::Mat& disparity_left, const cv::Mat& disparity_r
     }
   }
   return checked;
+}
+
+cv::Mat classifyInvalidPixels(const cv::Mat& checked, const cv::Mat& disparity_left, const cv::Mat& disparity_right,
+                              double tolerance_px) {
+  if (checked.type() != CV_32F || disparity_left.type() != CV_32F || disparity_right.type() != CV_32F ||
+      checked.size() != disparity_left.size() || checked.size() != disparity_right.size())
+    throw std::invalid_argument("classifyInvalidPixels: checked, left and right disparities must be CV_32F, one size");
+  const float tolerance = static_cast<float>(tolerance_px);
+  cv::Mat classes(checked.size(), CV_8U, cv::Scalar(kPixelValid));
+  for (int y = 0; y < checked.rows; ++y) {
+    const float* valid = checked.ptr<float>(y);
+    const float* left = disparity_left.ptr<float>(y);
+    const float* right = disparity_right.ptr<float>(y);
+    uint8_t* out = classes.ptr<uint8_t>(y);
+    for (int x = 0; x < checked.cols; ++x) {
+      if (std::isfinite(valid[x])) continue;
+      const float d = left[x];
+      const long match = std::isfinite(d) ? std::lround(x - d) : -1;
+      bool occluded = match < 0;
+      // p's match or right pixels left of it whose surface lies in front of p's and reaches p: they hide p's point.
+      for (int q = static_cast<int>(std::min<long>(match, checked.cols - 1)); !occluded && q >= 0; --q)
+        occluded = std::isfinite(right[q]) && right[q] > d + tolerance && q + right[q] >= x - 1.0f;
+      out[x] = occluded ? kPixelOccluded : kPixelMismatch;
+    }
+  }
+  return classes;
 }
 
 cv::Mat fillHoles(const cv::Mat& disparity) {

@@ -137,7 +137,7 @@ std::unique_ptr<DenseStereo> createDenseStereo(const std::string& method,
  *        (T = 3, penalty_large 80), two expansion cycles and no left-right check (its occlusion handling is better
  *        without: 1.9 % versus 3.4 % nonocc on Tsukuba, and it halves the run time); pm keeps the paper's settings
  *        (pm_* defaults) with the paper's weighted median of the filled pixels over 35x35 (fill_median_radius_px 17)
- *        and no final median.
+ *        and no final median (its filling tells occlusions from mismatches: see patchmatch_stereo.h).
  */
 DenseStereoConfig defaultConfigFor(const std::string& method, int max_disparity_px);
 

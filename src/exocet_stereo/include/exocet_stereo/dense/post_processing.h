@@ -4,6 +4,8 @@
  */
 #pragma once
 
+#include <cstdint>
+
 #include <opencv2/core.hpp>
 
 #include "exocet_stereo/dense/cost_volume.h"
@@ -25,6 +27,26 @@ void refineSubpixel(const CostVolume& volume, cv::Mat* disparity);
  *        disparity within tolerance_px of d. Others become NaN (occlusions and mismatches).
  */
 cv::Mat leftRightCheck(const cv::Mat& disparity_left, const cv::Mat& disparity_right, double tolerance_px);
+
+/// Why a left pixel has no disparity after the checks (values of classifyInvalidPixels()).
+enum InvalidPixelClass : uint8_t {
+  kPixelValid = 0,     ///< kept its disparity
+  kPixelOccluded = 1,  ///< hidden from the right view by a surface in front (or matched outside it)
+  kPixelMismatch = 2,  ///< visible in both views, but one of the two disparities is wrong
+};
+
+/**
+ * @brief Occlusion or mismatch for every invalid (NaN) pixel of `checked` (the left map after leftRightCheck() or any
+ *        later invalidation), after Hirschmueller's SGM: with d the raw left disparity at p = (x, y), p is OCCLUDED if
+ *        x - d falls outside the right image, or if p's match x - d (rounded) or some right pixel q left of it holds a
+ *        surface in FRONT of p's (disparity_right(q) > d + tolerance_px) that reaches p in the left view
+ *        (q + disparity_right(q) >= x - 1): that surface hides p's point from the right camera. Otherwise p is a
+ *        MISMATCH (e.g. the right map is wrong at x - d although p's surface is visible there).
+ * @return CV_8U map of InvalidPixelClass (kPixelValid where `checked` is finite).
+ * @throws std::invalid_argument if the three maps are not CV_32F of one size.
+ */
+cv::Mat classifyInvalidPixels(const cv::Mat& checked, const cv::Mat& disparity_left, const cv::Mat& disparity_right,
+                              double tolerance_px);
 
 /**
  * @brief Fill NaN pixels: per row, with the lower of the nearest valid disparities to the left and right (occluded
