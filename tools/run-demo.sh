@@ -91,6 +91,14 @@ if [[ ! -e ${tiles[0]} ]]; then
 fi
 rosrun exocet_mosaic tiles_overview --tiles "$out/tiles" --track "$out/fused_track.csv" \
   --output "$out/tiles_overview.png"
+
+echo "run-demo: after the dive, the overlapping tiles adjusted into agreement (adjust_tiles)"
+rm -rf "$out/tiles_adjusted"
+mkdir -p "$out/tiles_adjusted"
+rosrun exocet_mosaic adjust_tiles --tiles "$out/tiles" --output "$out/tiles_adjusted" \
+  --report "$out/tiles_adjusted/adjustment.json"
+rosrun exocet_mosaic tiles_overview --tiles "$out/tiles_adjusted" --track "$out/fused_track.csv" \
+  --output "$out/tiles_adjusted_overview.png"
 for tile in "${tiles[@]}"; do
   [[ $tile == *.cog.tif ]] && continue
   gdalinfo "$tile" > "${tile%.tif}.gdalinfo.txt"
