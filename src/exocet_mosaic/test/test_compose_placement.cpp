@@ -185,6 +185,19 @@ TEST(ComposePlacement, ConsecutiveTilesOverlapAndAlign) {
   }
 }
 
+/// The frame as a compressed stream gives it: shape announced, pixels decoded (counted in *loads) only on demand.
+ec::ComposerFrame deferredFrame(const ec::ComposerFrame& frame, int* loads) {
+  ec::ComposerFrame deferred = frame;
+  deferred.image = cv::Mat();
+  deferred.image_size = frame.image.size();
+  deferred.image_channels = frame.image.channels();
+  deferred.load_image = [image = frame.image, loads]() {
+    ++*loads;
+    return image.clone();
+  };
+  return deferred;
+}
+
 TEST(ComposePlacement, LazyImagesGiveTheSameTileAndOnlyTheDrawnOnesAreDecoded) {
   // A compressed stream's images are decoded only for the frames the composer draws: same tile, fewer decodes.
   FrameFactory factory = makeFactory(truth(), 0.0);
@@ -197,14 +210,7 @@ TEST(ComposePlacement, LazyImagesGiveTheSameTileAndOnlyTheDrawnOnesAreDecoded) {
   for (int i = 0; i < 120; ++i) {
     const ec::ComposerFrame frame = factory.frame(i);
     if (auto t = eager.add(frame)) eager_tiles.push_back(*t);
-    ec::ComposerFrame deferred = frame;
-    deferred.image = cv::Mat();
-    deferred.image_size = frame.image.size();
-    deferred.image_channels = frame.image.channels();
-    deferred.load_image = [image = frame.image, &loads]() {
-      ++loads;
-      return image.clone();
-    };
+    const ec::ComposerFrame deferred = deferredFrame(frame, &loads);
     if (auto t = lazy.add(deferred)) lazy_tiles.push_back(*t);
   }
   if (auto t = eager.flush()) eager_tiles.push_back(*t);
@@ -237,14 +243,7 @@ TEST(ComposePlacement, TheLightingFieldObservesTheKeyFramesWithoutDecodingMore) 
   std::vector<ec::ClosedMosaic> tiles;
   for (int i = 0; i < 120; ++i) {
     const ec::ComposerFrame frame = factory.frame(i);
-    ec::ComposerFrame deferred = frame;
-    deferred.image = cv::Mat();
-    deferred.image_size = frame.image.size();
-    deferred.image_channels = frame.image.channels();
-    deferred.load_image = [image = frame.image, &loads]() {
-      ++loads;
-      return image.clone();
-    };
+    const ec::ComposerFrame deferred = deferredFrame(frame, &loads);
     if (auto t = lazy.add(deferred)) tiles.push_back(*t);
   }
   if (auto t = lazy.flush()) tiles.push_back(*t);
