@@ -68,7 +68,9 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   subscribe(&usbl_sub_, config_.usbl_topic, 50, &FusionRos::onUsbl);
   subscribe(&imu_sub_, config_.imu_topic, 500, &FusionRos::onImu);
   subscribe(&altitude_sub_, config_.altitude_topic, 200, &FusionRos::onAltitude);
-  subscribe(&camera_info_sub_, config_.camera_info_topic, 5, &FusionRos::onCameraInfo);
+  // One camera_info per image announces it (its motion holds back the later inputs): as deep as the motions' queue,
+  // or an image is missed when a replay's burst outruns the callbacks.
+  subscribe(&camera_info_sub_, config_.camera_info_topic, 200, &FusionRos::onCameraInfo);
   subscribe(&datum_sub_, config_.datum_topic, 1, &FusionRos::onDatum);
 
   odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.odometry_out_topic, 100);
