@@ -680,7 +680,9 @@ void FusionRos::appendPath(nav_msgs::Path* path, const ros::Time& stamp, const E
 }
 
 void FusionRos::publishState(const ros::Time& stamp) {
-  if (!filter_.initialized()) return;
+  // When the images stop the navigation carries the track, and its stamps can be an image's already published.
+  if (!filter_.initialized() || stamp == last_published_stamp_) return;
+  last_published_stamp_ = stamp;
   const fu::FilterState s = filter_.current();
   const auto attitude = attitudeAt(stamp.toSec());
   const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);

@@ -161,6 +161,7 @@ class FusionRos {
   double newest_motion_stamp_s_ = -1e300;
   uint64_t motion_waits_timed_out_ = 0;
   ros::SteadyTime last_input_wall_;
+  ros::Time last_published_stamp_;  // of the last fused pose: one pose per stamp (tf refuses a repeated one)
   ros::SteadyTimer flush_timer_;
 
   // Tracks.
