@@ -19,6 +19,24 @@ echo
 echo "Full log: out/test.log ($(($(date +%s) - start)) s)"
 summary=$(catkin_test_results build/test_results 2>&1)
 echo "$summary" | grep -vE "^Skipping" | tail -n 30
+# Why each failed test failed (a CI log shows only this output's tail): the failure messages of the result files.
+/usr/bin/python3 - build/test_results <<'PY'
+import glob, os, sys
+import xml.etree.ElementTree as ET
+for path in sorted(glob.glob(os.path.join(sys.argv[1], "**", "*.xml"), recursive=True)):
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        print("unreadable result file %s: %s" % (path, e))
+        continue
+    for case in root.iter("testcase"):
+        for bad in list(case.findall("failure")) + list(case.findall("error")):
+            text = (bad.get("message") or "") + "\n" + (bad.text or "")
+            lines = [l for l in text.strip().splitlines() if l.strip()][:20]
+            print("FAILED %s: %s.%s" % (os.path.relpath(path, sys.argv[1]), case.get("classname"), case.get("name")))
+            for l in lines:
+                print("    " + l[:300])
+PY
 line=$(echo "$summary" | grep -E "^Summary:" | tail -n 1)
 if [[ -z $line ]]; then
   echo "run-tests: no test results were produced (see out/test.log)"

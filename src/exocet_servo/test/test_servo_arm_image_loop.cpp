@@ -4,6 +4,7 @@
 // whose velocity the arm executes by resolved rate for one period (4 Hz), clamped as the node does.
 #include <cstdio>
 #include <limits>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -57,6 +58,39 @@ TEST(ServoArmImageLoop, LeftCameraReachesTheRightCamerasPoseThroughTheArm) {
   std::printf("arm image loop: converged in %d images, %.3f mm, %.4f deg\n", it + 1, e.position_mm, e.rotation_deg);
   EXPECT_LT(e.position_mm, 2.0);
   EXPECT_LT(e.rotation_deg, 0.2);
+}
+
+// A law that makes no progress (here the arm does not move: the same left image every time) gets a fresh point set by
+// a whole-image SIFT matching every stall_rematch_images images, within the re-matching budget, and no more.
+TEST(ServoArmImageLoop, AStalledLawIsGivenAFreshPointSetWithinTheBudget) {
+  sim::ArmRigConfig rig;
+  sim::ArmRigSimulator sim(rig);
+  const sim::StereoViews views = sim.render();
+  control::ImageServoConfig config;
+  config.matcher.ratio = 0.6;
+  config.stall_rematch_images = 6;
+  config.max_rematches = 3;
+  control::ImageServoController controller(config, rig.right_camera.k, rig.left_camera.k, rig.left_camera.width_px,
+                                           rig.left_camera.height_px);
+  ASSERT_EQ(controller.setReference(views.right.image, lookupIn(views.right, config)), "");
+  std::vector<int> rematched_at;
+  for (int it = 0; it < 40; ++it) {
+    const control::ImageStep step = controller.step(views.left.image, lookupIn(views.left, config));
+    ASSERT_EQ(step.status, control::ImageStepStatus::kRunning) << it << ": " << step.message;
+    ASSERT_GT(step.error_norm, config.rematch_below_error);  // far from the goal: the stall rule applies
+    if (step.rematched && it > 0) rematched_at.push_back(it);
+  }
+  // The stall is seen on the 6th image without progress after a matching; the matching is done on the next image.
+  EXPECT_EQ(rematched_at, (std::vector<int>{7, 14, 21}));
+  EXPECT_EQ(controller.stallRematches(), 3);
+  EXPECT_EQ(controller.rematches(), 3);
+
+  config.stall_rematch_images = 0;  // off
+  control::ImageServoController off(config, rig.right_camera.k, rig.left_camera.k, rig.left_camera.width_px,
+                                    rig.left_camera.height_px);
+  ASSERT_EQ(off.setReference(views.right.image, lookupIn(views.right, config)), "");
+  for (int it = 0; it < 40; ++it) off.step(views.left.image, lookupIn(views.left, config));
+  EXPECT_EQ(off.rematches(), 0);
 }
 
 }  // namespace

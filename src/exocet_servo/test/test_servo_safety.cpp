@@ -94,6 +94,33 @@ TEST(ServoSafety, GrowingErrorStopsAfterTheConsecutiveIterationsButNotOnATransie
       << monitor.message();
 }
 
+TEST(ServoSafety, NoiseBelowTheGrowthFloorIsNotAGrowthButADivergenceAboveItIs) {
+  ServoSafetyConfig config;
+  config.growth_factor = 10.0;
+  config.growth_iterations = 10;
+  config.growth_floor = 0.003;
+  ServoSafetyMonitor monitor(config);
+  // Near the goal |e| is the measurement's noise (1e-3 .. 3e-3, as the re-anchored points give): one lucky sample
+  // of 2e-4 makes every later one look 10 x larger. 30 such images are no growth.
+  for (double e : {0.4, 0.05, 0.004, 0.0002}) ASSERT_EQ(monitor.update(healthy(e)), SafetyStatus::kOk);
+  for (int i = 0; i < 30; ++i) {
+    const double e = i % 3 == 0 ? 0.003 : 0.0012 + 0.0005 * (i % 2);
+    ASSERT_EQ(monitor.update(healthy(e)), SafetyStatus::kOk) << i << ": " << monitor.message();
+  }
+  // Leaving the goal for real (above the floor and 10 x the minimum): stops after the 10th image.
+  int it = 0;
+  while (monitor.update(healthy(0.004 * (1.0 + 0.1 * it))) == SafetyStatus::kOk && it < 100) ++it;
+  EXPECT_EQ(it + 1, 10);
+  EXPECT_EQ(monitor.status(), SafetyStatus::kErrorGrowing);
+  // Without the floor the noise alone stops it.
+  config.growth_floor = 0.0;
+  ServoSafetyMonitor strict(config);
+  for (double e : {0.4, 0.05, 0.004, 0.0002}) ASSERT_EQ(strict.update(healthy(e)), SafetyStatus::kOk);
+  int noisy = 0;
+  while (strict.update(healthy(0.0025)) == SafetyStatus::kOk && noisy < 100) ++noisy;
+  EXPECT_EQ(strict.status(), SafetyStatus::kErrorGrowing);
+}
+
 TEST(ServoSafety, LeavingTheWorkspaceBoxOrSphereStops) {
   ServoSafetyConfig config;
   config.workspace_min_m = Eigen::Vector3d(0.0, -0.5, -0.3);
@@ -181,13 +208,15 @@ TEST(ServoSafety, ConfigValidationListsEveryBadField) {
   c.min_tracked_points = 3;
   c.growth_factor = 1.0;
   c.growth_iterations = 0;
+  c.growth_floor = -1.0;
   c.workspace_max_m.x() = -5.0;
   c.workspace_radius_m = -1.0;
   c.max_iterations = 0;
   const std::string e = c.validate();
-  for (const char* field : {"min_tracked_points must be in [4, 100000]", "growth_factor must be in (1, 1e6]",
-                            "growth_iterations must be in [1, 10000]", "workspace_min_m, workspace_max_m",
-                            "workspace_radius_m must be in [0, 1000]", "max_iterations must be in [1, 10000000]"}) {
+  for (const char* field :
+       {"min_tracked_points must be in [4, 100000]", "growth_factor must be in (1, 1e6]",
+        "growth_iterations must be in [1, 10000]", "growth_floor must be in [0, 1]", "workspace_min_m, workspace_max_m",
+        "workspace_radius_m must be in [0, 1000]", "max_iterations must be in [1, 10000000]"}) {
     EXPECT_TRUE(contains(e, field)) << field << " missing from: " << e;
   }
   EXPECT_THROW(ServoSafetyMonitor{c}, std::invalid_argument);

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -104,6 +105,7 @@ std::string ImageServoConfig::validate() const {
   check(anchor_below_error >= 0.0 && anchor_below_error <= 1.0, "anchor_below_error", "[0, 1]");
   check(anchor_max_residual_px > 0.0 && anchor_max_residual_px <= 50.0, "anchor_max_residual_px", "(0, 50]");
   check(rematch_below_error >= 0.0 && rematch_below_error <= 1.0, "rematch_below_error", "[0, 1]");
+  check(stall_rematch_images >= 0 && stall_rematch_images <= 100000, "stall_rematch_images", "[0, 100000]");
   check(rigid_outlier_fraction >= 0.0 && rigid_outlier_fraction <= 1.0, "rigid_outlier_fraction", "[0, 1]");
   return errors.str();
 }
@@ -137,7 +139,8 @@ ImageServoController::ImageServoController(const ImageServoConfig& config, const
 
 std::string ImageServoController::setReference(const cv::Mat& reference_image, const DepthLookup& reference_depth) {
   have_reference_ = false;
-  iterations_ = rematches_ = initial_matches_ = 0;
+  iterations_ = rematches_ = initial_matches_ = stall_rematches_ = stalled_images_ = 0;
+  best_error_since_match_ = std::numeric_limits<double>::infinity();
   anchoring_ = force_rematch_ = rematched_near_goal_ = false;
   law_ids_.clear();
   ref_px_.clear();
@@ -157,8 +160,7 @@ std::string ImageServoController::rematch(const cv::Mat& image, const DepthLooku
   const vision::PointMatches m = matcher_.match(image);
   if (!m.ok()) return m.error;
   const auto noisy = [this]() {
-    return config_.depth_noise_fraction > 0.0 ? std::max(0.1, 1.0 + config_.depth_noise_fraction * gauss_(rng_))
-                                              : 1.0;
+    return config_.depth_noise_fraction > 0.0 ? std::max(0.1, 1.0 + config_.depth_noise_fraction * gauss_(rng_)) : 1.0;
   };
   ref_px_.clear();
   ref_px_cv_.clear();
@@ -237,8 +239,8 @@ ImageStep ImageServoController::step(const cv::Mat& current_image, const DepthLo
     force_rematch_ = false;
     if (it > 0 && rematches_ >= config_.max_rematches) {
       rec.status = ImageStepStatus::kLostTracking;
-      rec.message = "lost tracking: " + std::to_string(tracker_.points().size()) + " points tracked and max_rematches " +
-                    std::to_string(config_.max_rematches) + " spent";
+      rec.message = "lost tracking: " + std::to_string(tracker_.points().size()) +
+                    " points tracked and max_rematches " + std::to_string(config_.max_rematches) + " spent";
       return rec;
     }
     const auto m0 = Clock::now();
@@ -271,6 +273,7 @@ ImageStep ImageServoController::step(const cv::Mat& current_image, const DepthLo
   }
   t0 = Clock::now();
   c0 = threadCpuSeconds();
+  const std::vector<int> law_ids_before = law_ids_;
   if (ids != law_ids_) {
     std::vector<Eigen::Vector2d> r;
     std::vector<double> rd;
@@ -300,6 +303,22 @@ ImageStep ImageServoController::step(const cv::Mat& current_image, const DepthLo
   if (step.status == ServoStatus::kRunning && config_.anchor_below_error > 0.0 &&
       step.error_norm < config_.anchor_below_error)
     anchoring_ = true;
+  if (rec.rematched || ids != law_ids_before) {
+    // A new point set (matched again, or tracks lost): its |e| is not comparable with the last one's.
+    best_error_since_match_ = std::numeric_limits<double>::infinity();
+    stalled_images_ = 0;
+  }
+  if (step.status == ServoStatus::kRunning) {
+    if (step.error_norm < 0.8 * best_error_since_match_) {
+      best_error_since_match_ = step.error_norm;
+      stalled_images_ = 0;
+    } else if (++stalled_images_ >= config_.stall_rematch_images && config_.stall_rematch_images > 0 &&
+               step.error_norm > config_.rematch_below_error && rematches_ < config_.max_rematches && !force_rematch_) {
+      force_rematch_ = true;
+      ++stall_rematches_;
+      stalled_images_ = 0;
+    }
+  }
   if (step.status == ServoStatus::kRunning && step.error_norm < config_.rematch_below_error && !rematched_near_goal_ &&
       rematches_ < config_.max_rematches) {
     rematched_near_goal_ = true;

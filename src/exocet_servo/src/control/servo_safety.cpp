@@ -40,6 +40,7 @@ std::string ServoSafetyConfig::validate() const {
   check(min_tracked_points >= 4 && min_tracked_points <= 100000, "min_tracked_points", "[4, 100000]");
   check(growth_factor > 1.0 && growth_factor <= 1e6, "growth_factor", "(1, 1e6]");
   check(growth_iterations >= 1 && growth_iterations <= 10000, "growth_iterations", "[1, 10000]");
+  check(growth_floor >= 0.0 && growth_floor <= 1.0, "growth_floor", "[0, 1]");
   check(workspace_min_m.allFinite() && workspace_max_m.allFinite() &&
             (workspace_min_m.array() < workspace_max_m.array()).all(),
         "workspace_min_m, workspace_max_m", "finite vectors with min < max on every axis");
@@ -112,7 +113,7 @@ SafetyStatus ServoSafetyMonitor::update(const SafetyInput& in) {
     return stop(SafetyStatus::kLostTracking, m.str());
   }
   // Growth against the smallest error so far: noise makes |e| wobble, a real divergence keeps it high.
-  if (in.error_norm > config_.growth_factor * min_error_) {
+  if (in.error_norm > config_.growth_floor && in.error_norm > config_.growth_factor * min_error_) {
     ++growth_count_;
     if (growth_count_ >= config_.growth_iterations) {
       m << "|e| = " << in.error_norm << " > " << config_.growth_factor << " x its minimum " << min_error_ << " for "

@@ -77,7 +77,12 @@ ArmRigSimulatorRos::ArmRigSimulatorRos(ros::NodeHandle nh, ros::NodeHandle priva
   sim::ArmRigConfig arm_config;
   arm_config.scene.supersampling = config_.supersampling;
   sim_ = std::make_unique<sim::ArmRigSimulator>(arm_config);
-  command_sub_ = nh_.subscribe("arm/camera_velocity", 5, &ArmRigSimulatorRos::onCommand, this);
+  ros::SubscribeOptions command_options = ros::SubscribeOptions::create<geometry_msgs::TwistStamped>(
+      "arm/camera_velocity", 5, [this](const geometry_msgs::TwistStamped::ConstPtr& m) { onCommand(m); },
+      ros::VoidPtr(), &command_queue_);
+  command_sub_ = nh_.subscribe(command_options);
+  command_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &command_queue_);
+  command_spinner_->start();
   left_image_pub_ = nh_.advertise<sensor_msgs::Image>("left/image_raw", 2);
   left_depth_pub_ = nh_.advertise<sensor_msgs::Image>("left/depth", 2);
   left_info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("left/camera_info", 2);
@@ -115,6 +120,7 @@ void ArmRigSimulatorRos::onCommand(const geometry_msgs::TwistStamped::ConstPtr& 
   }
   command_ = twist;
   command_stamp_ = ros::Time::now();
+  command_image_stamp_ = msg->header.stamp;
   have_command_ = true;
   ++commands_;
 }
@@ -122,19 +128,29 @@ void ArmRigSimulatorRos::onCommand(const geometry_msgs::TwistStamped::ConstPtr& 
 void ArmRigSimulatorRos::onTick(const ros::TimerEvent&) {
   const double dt_s = 1.0 / config_.rate_hz;
   Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
+  ros::Time stamp;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    stamp = ros::Time::now();  // the images' stamp: every command received before it is in this tick's motion
     // Each command moves the arm for one period, once: a servo that falls behind (a loaded machine) makes the arm
     // wait instead of repeating a velocity computed from an older image (which overshoots and loses the object).
     if (have_command_ && (ros::Time::now() - command_stamp_).toSec() <= config_.command_timeout_s) twist = command_;
     have_command_ = false;
+    if (!twist.isZero()) {
+      if (!command_image_stamp_.isZero() && command_image_stamp_ < last_motion_stamp_) {
+        ++late_commands_;
+        ROS_DEBUG("arm_rig_simulator: command from the image of %.3f, after a motion at %.3f",
+                  command_image_stamp_.toSec(), last_motion_stamp_.toSec());
+      }
+    }
   }
   const sim::ResolvedRate rate = sim_->command(twist, dt_s);
   if (rate.status == sim::ArmStatus::kJointLimit || rate.status == sim::ArmStatus::kInvalidInput)
     ROS_WARN_THROTTLE(5.0, "arm_rig_simulator: %s: %s", sim::toString(rate.status).c_str(), rate.message.c_str());
   last_status_ = rate.status;
   last_message_ = rate.message;
-  publishViews(ros::Time::now());
+  if (!twist.isZero()) last_motion_stamp_ = stamp;  // (read on this thread only)
+  publishViews(stamp);
   diagnostics_.update();
 }
 
@@ -156,13 +172,12 @@ void ArmRigSimulatorRos::publishViews(const ros::Time& stamp) {
     header.stamp = stamp;
     header.frame_id = frame;
     // Depth first: the servo pairs each image with the depth map of the same stamp.
-    depth_pub.publish(cv_bridge::CvImage(header, sensor_msgs::image_encodings::TYPE_32FC1, depthForRos(view.depth_m))
-                          .toImageMsg());
+    depth_pub.publish(
+        cv_bridge::CvImage(header, sensor_msgs::image_encodings::TYPE_32FC1, depthForRos(view.depth_m)).toImageMsg());
     info_pub.publish(cameraInfo(camera, stamp, frame));
     image_pub.publish(cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, view.image).toImageMsg());
   };
-  publish(views.left, sim_->config().left_camera, config_.left_frame, left_image_pub_, left_depth_pub_,
-          left_info_pub_);
+  publish(views.left, sim_->config().left_camera, config_.left_frame, left_image_pub_, left_depth_pub_, left_info_pub_);
   publish(views.right, sim_->config().right_camera, config_.right_frame, right_image_pub_, right_depth_pub_,
           right_info_pub_);
   sensor_msgs::JointState joints;
@@ -184,6 +199,7 @@ void ArmRigSimulatorRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   std::lock_guard<std::mutex> lock(mutex_);
   status.add("commands", commands_);
   status.add("rejected commands", rejected_commands_);
+  status.add("late commands", late_commands_);
   status.add("command age (s)", have_command_ ? (ros::Time::now() - command_stamp_).toSec() : -1.0);
   for (int j = 0; j < sim::kArmJoints; ++j)
     status.add("joint " + std::to_string(j + 1) + " (rad)", sim_->jointPositions()[j]);

@@ -225,6 +225,8 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
   p.readDouble("sift_ratio", &s.matcher.ratio, 0.3, 1.0, "Lowe's ratio test of the SIFT matching");
   p.readInt("max_points", &s.max_points, 4, 100000, "points given to the law");
   p.readInt("max_rematches", &s.max_rematches, 0, 100000, "SIFT re-matchings allowed in one servoing");
+  p.readInt("stall_rematch_images", &s.stall_rematch_images, 0, 100000,
+            "images without progress of |e| (far from the goal) after which the whole image is matched again, 0: off");
   p.readInt("min_tracked_points", &s.tracker.min_points, 4, 100000, "tracked points below which SIFT re-matches");
   p.readPositiveDouble("max_linear_speed_mps", &c.max_linear_speed_mps, 10.0, "camera speed limit (m/s)");
   p.readPositiveDouble("max_angular_speed_rps", &c.max_angular_speed_rps, 10.0, "camera rotation speed limit (rad/s)");
@@ -242,6 +244,8 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
                                 "times its smallest value so far counts as growing");
   p.readInt("safety/growth_iterations", &f.growth_iterations, 1, 10000,
             "consecutive images with a growing |e| that stop the servo");
+  p.readDouble("safety/growth_floor", &f.growth_floor, 0.0, 1.0,
+               "|e| at or below this never counts as growing (the noise near the goal)");
   readVector3(p, private_nh, "safety/workspace_min_m", &f.workspace_min_m,
               "lower corner [x, y, z] of the workspace box of the left camera's centre in ~safety/world_frame (m)");
   readVector3(p, private_nh, "safety/workspace_max_m", &f.workspace_max_m,
@@ -315,11 +319,11 @@ ServoRos::ServoRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
       f.workspace_radius_m > 0.0 ? ", sphere of " + fixed(f.workspace_radius_m) + " m" : std::string();
   ROS_INFO(
       "servo: safety: joints %s (margin %.3f rad, look-ahead %.2f s), workspace box [%g %g %g] .. [%g %g %g] m in "
-      "'%s'%s, at least %d points, |e| growing x%g for %d images",
+      "'%s'%s, at least %d points, |e| growing x%g (above %g) for %d images",
       config_.joints.enabled ? "checked" : "NOT checked", config_.joints.margin_rad, config_.joints.lookahead_s,
       f.workspace_min_m.x(), f.workspace_min_m.y(), f.workspace_min_m.z(), f.workspace_max_m.x(), f.workspace_max_m.y(),
       f.workspace_max_m.z(), config_.world_frame.c_str(), sphere.c_str(), f.min_tracked_points, f.growth_factor,
-      f.growth_iterations);
+      f.growth_floor, f.growth_iterations);
 }
 
 void ServoRos::onLeftImage(const sensor_msgs::ImageConstPtr& msg) {
@@ -385,6 +389,16 @@ bool ServoRos::onStop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& 
 void ServoRos::stepOnLeftPair() {
   const ros::Time stamp = left_.image->header.stamp;
   if (state_ != State::kServoing || stamp <= reference_stamp_ || stamp == last_processed_stamp_) return;
+  {
+    // An image exposed before the last command was sent cannot show its motion: a velocity computed from it repeats
+    // that command, and the arm overshoots. A servo that falls behind (a loaded machine, images queued) would do that
+    // at every image; it waits for an image that shows its last command instead.
+    std::lock_guard<std::mutex> lock(joint_mutex_);
+    if (stamp <= last_command_time_) {
+      ++stale_images_;
+      return;
+    }
+  }
   last_processed_stamp_ = stamp;
   left_frame_ = left_.image->header.frame_id;
   std::string error;
@@ -552,6 +566,7 @@ void ServoRos::publishVelocity(const Eigen::Matrix<double, 6, 1>& twist, const r
   msg.twist.angular.y = twist[4];
   msg.twist.angular.z = twist[5];
   velocity_pub_.publish(msg);
+  // Taken once the command is sent: an image stamped later is from a tick that had it (up to the transport time).
   std::lock_guard<std::mutex> lock(joint_mutex_);
   last_command_time_ = ros::Time::now();
 }
@@ -569,9 +584,11 @@ void ServoRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.add("|e|", last_step_.error_norm);
   status.add("points", last_step_.points);
   status.add("re-matchings", controller_ ? controller_->rematches() : 0);
+  status.add("re-matchings on a stalled law", controller_ ? controller_->stallRematches() : 0);
   status.add("servoings", servoings_);
   status.add("converged", converged_);
   status.add("corrupt images", corrupt_images_);
+  status.add("stale images skipped", stale_images_);
 }
 
 }  // namespace exocet_servo

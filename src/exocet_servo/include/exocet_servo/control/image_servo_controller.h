@@ -42,11 +42,11 @@ struct ImageServoConfig {
   }();
   vision::MatcherConfig matcher;
   vision::TrackerConfig tracker;
-  double dt_s = 1.0;                      ///< period of the velocity (integration, or command), (0, 100]
-  double depth_noise_fraction = 0.0;      ///< simulation: relative depth error, fixed per point, [0, 0.5]
-  unsigned seed = 1;                      ///< of the depth errors
-  int max_points = 300;                   ///< points given to the law (evenly thinned), [4, 100000]
-  int depth_check_radius_px = 3;          ///< half-side of the window a depth lookup checks for a discontinuity, [0, 50]
+  double dt_s = 1.0;                  ///< period of the velocity (integration, or command), (0, 100]
+  double depth_noise_fraction = 0.0;  ///< simulation: relative depth error, fixed per point, [0, 0.5]
+  unsigned seed = 1;                  ///< of the depth errors
+  int max_points = 300;               ///< points given to the law (evenly thinned), [4, 100000]
+  int depth_check_radius_px = 3;      ///< half-side of the window a depth lookup checks for a discontinuity, [0, 50]
   double depth_max_relative_step = 0.03;  ///< max / min depth in that window, [0, 10]
   int max_rematches = 10;                 ///< SIFT re-matchings allowed during one servoing, [0, 100000]
   /// Once the law's |e| falls below this, the points are re-anchored on the reference image at every image
@@ -57,6 +57,10 @@ struct ImageServoConfig {
   /// current view is nearly the reference view, so SIFT finds many more pairs than across the rig's baseline at the
   /// start, and more points lower the floor of |e| (the re-anchored points' jitter averages out).
   double rematch_below_error = 0.002;
+  /// A point set on which the law stalls far from the goal (|e| above rematch_below_error not falling below 0.8 x its
+  /// smallest value since the last matching for this many images: after tracking losses the survivors can be too few
+  /// or too bunched to drive every axis) is replaced: the whole image is matched again. 0 disables it, [0, 100000].
+  int stall_rematch_images = 12;
   /// SIFT pairs are also checked in 3D: each pair's two points (back-projected with the depths and the intrinsics
   /// estimates) must follow one rigid motion, fitted by RANSAC; a pair farther from it than this fraction of its
   /// depth is an outlier (0 disables the check), [0, 1]. The epipolar RANSAC of the matcher lets through pairs that
@@ -73,11 +77,11 @@ using DepthLookup = std::function<double(const Eigen::Vector2d& px)>;
 
 /// Outcome of one image.
 enum class ImageStepStatus {
-  kRunning,         ///< a velocity to apply
-  kConverged,       ///< the law's |e| fell below its threshold (velocity zero)
-  kLostTracking,    ///< too few tracked points and SIFT re-matching failed, or re-matched too often
-  kServoStopped,    ///< the law stopped otherwise (error growing, degenerate, points left the image...)
-  kNoReference,     ///< step() before a usable setReference()
+  kRunning,       ///< a velocity to apply
+  kConverged,     ///< the law's |e| fell below its threshold (velocity zero)
+  kLostTracking,  ///< too few tracked points and SIFT re-matching failed, or re-matched too often
+  kServoStopped,  ///< the law stopped otherwise (error growing, degenerate, points left the image...)
+  kNoReference,   ///< step() before a usable setReference()
 };
 /// Short name ("running", "converged", "lost tracking", "servo stopped", "no reference").
 std::string toString(ImageStepStatus status);
@@ -88,10 +92,10 @@ struct ImageStep {
   ServoStatus servo_status = ServoStatus::kInvalidInput;  ///< of the law's step
   std::string message;
   Eigen::Matrix<double, 6, 1> velocity = Eigen::Matrix<double, 6, 1>::Zero();  ///< (v [m/s], omega [rad/s]), camera
-  double error_norm = 0.0;  ///< the law's |e|
-  int points = 0;           ///< points given to the law
-  bool rematched = false;   ///< SIFT matching ran on this image
-  bool anchored = false;    ///< the points were re-anchored on the reference image
+  double error_norm = 0.0;                                                     ///< the law's |e|
+  int points = 0;                                                              ///< points given to the law
+  bool rematched = false;                                                      ///< SIFT matching ran on this image
+  bool anchored = false;            ///< the points were re-anchored on the reference image
   double control_time_s = 0.0;      ///< tracking + invariant features + law (no SIFT, no depth lookup), wall
   double control_cpu_time_s = 0.0;  ///< the same, CPU time of the calling thread
   double match_time_s = 0.0;        ///< SIFT matching when it ran
@@ -112,8 +116,9 @@ class ImageServoController {
   /// One current image (8-bit gray, the controlled camera's) and its depths: the velocity to apply for dt_s.
   ImageStep step(const cv::Mat& current_image, const DepthLookup& current_depth);
 
-  int iterations() const { return iterations_; }    ///< images stepped since setReference()
-  int rematches() const { return rematches_; }      ///< SIFT matchings after the first
+  int iterations() const { return iterations_; }           ///< images stepped since setReference()
+  int rematches() const { return rematches_; }             ///< SIFT matchings after the first
+  int stallRematches() const { return stall_rematches_; }  ///< of which forced by a stalled law
   int initialMatches() const { return initial_matches_; }
   const ImageServoConfig& config() const { return config_; }
 
@@ -139,7 +144,9 @@ class ImageServoController {
   bool anchoring_ = false;
   bool force_rematch_ = false;
   bool rematched_near_goal_ = false;
-  int iterations_ = 0, rematches_ = 0, initial_matches_ = 0;
+  int iterations_ = 0, rematches_ = 0, initial_matches_ = 0, stall_rematches_ = 0;
+  double best_error_since_match_ = 0.0;  ///< smallest |e| since the last matching (stall detection)
+  int stalled_images_ = 0;
 };
 
 }  // namespace control

@@ -27,6 +27,9 @@ struct ServoSafetyConfig {
   double growth_factor = 2.0;
   /// ... for this many consecutive iterations, [1, 10000].
   int growth_iterations = 5;
+  /// |e| at or below this never counts as growing, [0, 1]: near the goal |e| is the measurement's noise, and against a
+  /// lucky low sample the noise alone would look like a growth. 0: off.
+  double growth_floor = 0.0;
   /// Workspace box of the camera centre (world, m); min < max on every axis.
   Eigen::Vector3d workspace_min_m = Eigen::Vector3d(-2.0, -2.0, -2.0);
   Eigen::Vector3d workspace_max_m = Eigen::Vector3d(2.0, 2.0, 2.0);

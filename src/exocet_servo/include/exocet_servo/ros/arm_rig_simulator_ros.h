@@ -23,6 +23,7 @@
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <geometry_msgs/TwistStamped.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -32,13 +33,13 @@
 namespace exocet_servo {
 
 struct ArmRigSimulatorNodeConfig {
-  double rate_hz = 4.0;             ///< images and control ticks per second, (0, 50]
-  double command_timeout_s = 0.6;   ///< a command older than this is dropped (the arm stops), (0, 10]
+  double rate_hz = 4.0;            ///< images and control ticks per second, (0, 50]
+  double command_timeout_s = 0.6;  ///< a command older than this is dropped (the arm stops), (0, 10]
   std::string world_frame = "arm_base";
   std::string flange_frame = "arm_flange";
   std::string left_frame = "left_camera_optical";
   std::string right_frame = "right_camera_optical";
-  int supersampling = 2;            ///< rays per pixel side of the renderer, [1, 8] (1 aliases: KLT jitters)
+  int supersampling = 2;  ///< rays per pixel side of the renderer, [1, 8] (1 aliases: KLT jitters)
 };
 
 /// Reads and checks the private parameters. @throws std::invalid_argument naming the parameter and its range.
@@ -69,10 +70,19 @@ class ArmRigSimulatorRos {
   std::mutex mutex_;  ///< the command (callbacks may run on other threads with an AsyncSpinner)
   Eigen::Matrix<double, 6, 1> command_ = Eigen::Matrix<double, 6, 1>::Zero();
   ros::Time command_stamp_;
+  ros::Time command_image_stamp_;  ///< the command's header stamp: the image it was computed from
+  ros::Time last_motion_stamp_;    ///< stamp of the last tick that moved the arm
   bool have_command_ = false;
   long commands_ = 0, rejected_commands_ = 0;
+  /// Commands computed from an image older than the arm's last motion: the servo acted on an image that did not show
+  /// its previous command (a late loop), and the arm moves twice for one error.
+  long late_commands_ = 0;
   sim::ArmStatus last_status_ = sim::ArmStatus::kOk;
   std::string last_message_;
+  /// Commands are taken on their own thread, as an arm controller does, not behind the rendering of the tick: a
+  /// command sent before a tick's stamp is in that tick's motion.
+  ros::CallbackQueue command_queue_;
+  std::unique_ptr<ros::AsyncSpinner> command_spinner_;  ///< last: stopped before anything it uses goes
 };
 
 }  // namespace exocet_servo

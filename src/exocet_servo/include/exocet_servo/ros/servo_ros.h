@@ -84,6 +84,7 @@ struct ServoNodeConfig {
     control::ServoSafetyConfig c;
     c.growth_factor = 10.0;
     c.growth_iterations = 10;
+    c.growth_floor = 0.003;  // 10 x the convergence threshold: the |e| the re-anchored points' jitter reaches
     c.max_iterations = 10000000;
     return c;
   }();
@@ -157,6 +158,7 @@ class ServoRos {
   int iterations_ = 0;
   control::ImageStep last_step_;
   long servoings_ = 0, converged_ = 0, corrupt_images_ = 0, safety_stops_ = 0;
+  long stale_images_ = 0;                             ///< images exposed before the last command was sent, skipped
   std::unique_ptr<ros::AsyncSpinner> joint_spinner_;  ///< last: stopped before anything it uses goes
 };
 
