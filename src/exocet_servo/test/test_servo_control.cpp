@@ -131,10 +131,12 @@ TEST(ServoConfig, ValidateListsEveryBadField) {
   EXPECT_EQ(c.validate(), "");
   c.max_iterations = 0;
   c.convergence_threshold = -1.0;
+  c.convergence_window = 0;
   c.gain.gain_at_zero = 0.0;
   const std::string msg = c.validate();
   EXPECT_NE(msg.find("max_iterations"), std::string::npos);
   EXPECT_NE(msg.find("convergence_threshold"), std::string::npos);
+  EXPECT_NE(msg.find("convergence_window must be in [1, 1000]"), std::string::npos);
   EXPECT_NE(msg.find("gain_at_zero"), std::string::npos);
   EXPECT_THROW(control::InvariantServo{c}, std::invalid_argument);
 }
@@ -335,6 +337,39 @@ TEST(ServoStopCriteria, GrowingErrorStopsTheServo) {
       sim::simulateServo(rc.points, rc.right, rc.reference, rc.left, near_start, servo, simc, rc.right.k, rc.left.k);
   EXPECT_EQ(r.status, ServoStatus::kErrorGrowing) << r.message;
   EXPECT_LT(r.iterations, 100);
+}
+
+// At the goal, image noise that alternates in sign (+n, -n, +n, ...) keeps every single |e| above the threshold, but
+// its mean over an even window is zero: convergence_window 6 converges on the 6th step, a window of 1 never does.
+TEST(ServoStopCriteria, TheMeanOfEOverAWindowConvergesThroughNoise) {
+  const std::vector<Eigen::Vector3d> points = ventPoints(100);
+  const Eigen::Isometry3d pose = leftPose();
+  const sim::Projection reference = sim::project(rightCamera(), pose, points);
+  const sim::Projection current = sim::project(leftCamera(), pose, points);  // at the goal, other intrinsics
+  std::mt19937 rng(5);
+  std::normal_distribution<double> gauss(0.0, 0.05);
+  std::vector<Eigen::Vector2d> pattern;
+  for (size_t i = 0; i < points.size(); ++i) pattern.emplace_back(gauss(rng), gauss(rng));
+  for (int window : {1, 6}) {
+    control::ServoConfig config;
+    config.convergence_threshold = 1e-4;
+    config.convergence_window = window;
+    control::InvariantServo servo(config);
+    ASSERT_EQ(servo.setReference(reference.points_px, rightCamera().k, reference.depths_m), "");
+    int converged_at = 0;
+    for (int it = 1; it <= 40 && converged_at == 0; ++it) {
+      std::vector<Eigen::Vector2d> noisy = current.points_px;
+      for (size_t i = 0; i < noisy.size(); ++i) noisy[i] += (it % 2 ? 1.0 : -1.0) * pattern[i];
+      const control::ServoStep step = servo.step(noisy, leftCamera().k, current.depths_m);
+      if (step.status == ServoStatus::kConverged) {
+        converged_at = it;
+      } else {
+        ASSERT_EQ(step.status, ServoStatus::kRunning) << step.message;
+        ASSERT_GT(step.error_norm, 10.0 * config.convergence_threshold);  // one image alone is far from it
+      }
+    }
+    EXPECT_EQ(converged_at, window == 1 ? 0 : 6) << "window " << window;
+  }
 }
 
 TEST(ServoStopCriteria, BudgetInputsAndStickyStatus) {

@@ -74,6 +74,7 @@ std::string ServoConfig::validate() const {
   const std::string gain_errors = gain.validate();
   if (!gain_errors.empty()) errors << gain_errors;
   check(convergence_threshold > 0.0 && convergence_threshold <= 1.0, "convergence_threshold", "(0, 1]");
+  check(convergence_window >= 1 && convergence_window <= 1000, "convergence_window", "[1, 1000]");
   check(max_iterations >= 1 && max_iterations <= 1000000, "max_iterations", "[1, 1000000]");
   check(growth_iterations >= 2 && growth_iterations <= 10000, "growth_iterations", "[2, 10000]");
   check(growth_ratio >= 1.0 && growth_ratio <= 1e6, "growth_ratio", "[1, 1e6]");
@@ -97,6 +98,7 @@ std::string InvariantServo::setReference(const std::vector<Eigen::Vector2d>& poi
   iteration_ = 0;
   growth_count_ = 0;
   last_norm_ = min_norm_ = 0.0;
+  recent_errors_.clear();
   if (points_px.size() < 4) return "reference needs at least 4 points, got " + std::to_string(points_px.size());
   std::string err = checkIntrinsics(k);
   if (!err.empty()) return "reference " + err;
@@ -188,6 +190,19 @@ ServoStep InvariantServo::step(const std::vector<Eigen::Vector2d>& points_px, co
     msg << "converged in " << iteration_ << " iterations: |e| = " << out.error_norm << " < "
         << config_.convergence_threshold;
     return finish(out, ServoStatus::kConverged, msg.str());
+  }
+  recent_errors_.push_back(out.task_error);
+  if (static_cast<int>(recent_errors_.size()) > config_.convergence_window) recent_errors_.pop_front();
+  if (config_.convergence_window > 1 && static_cast<int>(recent_errors_.size()) == config_.convergence_window) {
+    Eigen::Matrix<double, 6, 1> mean = Eigen::Matrix<double, 6, 1>::Zero();
+    for (const auto& e : recent_errors_) mean += e;
+    mean /= static_cast<double>(recent_errors_.size());
+    if (mean.norm() < config_.convergence_threshold) {
+      std::ostringstream msg;
+      msg << "converged in " << iteration_ << " iterations: the mean of e over the last " << config_.convergence_window
+          << " is " << mean.norm() << " < " << config_.convergence_threshold << " (|e| = " << out.error_norm << ")";
+      return finish(out, ServoStatus::kConverged, msg.str());
+    }
   }
   // Growth: noise makes |e| wobble near convergence, so a run of increases only counts once |e| is well above the
   // smallest value reached.

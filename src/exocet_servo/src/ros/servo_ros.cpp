@@ -221,6 +221,8 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
                        "gain of the law far from the goal (1/s), at most gain_near");
   p.readPositiveDouble("convergence_threshold", &s.servo.convergence_threshold, 1.0,
                        "|e| below which the servoing has converged");
+  p.readInt("convergence_window", &s.servo.convergence_window, 1, 1000,
+            "images over which the mean of e is also compared with the threshold (1: one image only)");
   p.readInt("max_iterations", &s.servo.max_iterations, 1, 1000000, "images per servoing before it gives up");
   p.readDouble("sift_ratio", &s.matcher.ratio, 0.3, 1.0, "Lowe's ratio test of the SIFT matching");
   p.readInt("max_points", &s.max_points, 4, 100000, "points given to the law");

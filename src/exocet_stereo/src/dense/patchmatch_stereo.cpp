@@ -476,7 +476,15 @@ void PatchMatchStereo::computeRaw(const cv::Mat& left, const cv::Mat& right, cv:
 }
 
 cv::Mat PatchMatchStereo::compute(const cv::Mat& left, const cv::Mat& right) const {
-  const PlaneMaps planes = computePlanes(left, right);
+  return postProcess(left, right, computePlanes(left, right));
+}
+
+cv::Mat PatchMatchStereo::postProcess(const cv::Mat& left, const cv::Mat& right, const PlaneMaps& planes) const {
+  const std::string error = checkImages(left, right);
+  if (!error.empty()) throw std::invalid_argument(name() + ": " + error);
+  if (planes.left.size() != left.size() || planes.right.size() != right.size() || planes.left.type() != CV_32FC3 ||
+      planes.right.type() != CV_32FC3)
+    throw std::invalid_argument(name() + ": the plane maps must be CV_32FC3 of the images' size");
   const cv::Mat raw_left = planeDisparity(planes.left);
   cv::Mat result = raw_left, classes;
   if (config_.left_right_check) {

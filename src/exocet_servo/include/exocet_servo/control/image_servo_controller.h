@@ -36,6 +36,7 @@ struct ImageServoConfig {
   ServoConfig servo = [] {
     ServoConfig c;
     c.convergence_threshold = 3e-4;
+    c.convergence_window = 6;  // or the mean of e over 6 images: after the rig's step |e| can stay at 1e-3 (noise)
     c.max_iterations = 80;
     c.gain = AdaptiveGain{0.7, 0.3, 4.0};
     return c;

@@ -10,6 +10,7 @@
  */
 #pragma once
 
+#include <deque>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,10 @@ struct ServoConfig {
   /// points set it just above the noise floor of |e|, about sqrt(2) times the pose bound of sim/pose_bound.h (0.025
   /// for 100 points at 0.5 px on the 0.3 m vent at 1 m), or the servo never converges.
   double convergence_threshold = 1e-4;
+  /// Converged also when the mean of e over the last this many steps (of one reference set) is below the threshold,
+  /// [1, 1000]: near the goal e carries the image noise, and the mean of a few steps estimates the remaining
+  /// displacement better than one step (1: one step only).
+  int convergence_window = 1;
   int max_iterations = 200;      ///< [1, 1000000]
   int growth_iterations = 10;    ///< consecutive increases of |e| that stop the servo, [2, 10000]
   double growth_ratio = 3.0;     ///< and |e| must exceed this times its smallest value so far, [1, 1e6]
@@ -111,6 +116,7 @@ class InvariantServo {
   Eigen::VectorXd reference_stacked_;
   Eigen::MatrixXd reference_interaction_;
   int iteration_ = 0;
+  std::deque<Eigen::Matrix<double, 6, 1>> recent_errors_;  ///< e of the last convergence_window steps
   int growth_count_ = 0;
   double last_norm_ = 0.0;
   double min_norm_ = 0.0;

@@ -97,6 +97,10 @@ class PatchMatchStereo : public DenseStereo {
   /// Optimised planes of both views, before any post-processing. @throws std::invalid_argument on bad images.
   PlaneMaps computePlanes(const cv::Mat& left, const cv::Mat& right) const;
 
+  /// compute()'s post-processing of planes from computePlanes() (so that the checks and fills can be changed without
+  /// optimising again). @throws std::invalid_argument on bad images or plane maps.
+  cv::Mat postProcess(const cv::Mat& left, const cv::Mat& right, const PlaneMaps& planes) const;
+
  protected:
   void computeRaw(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity_left,
                   cv::Mat* disparity_right) const override;
