@@ -132,10 +132,11 @@ TEST(PatchMatchStereo, TsukubaNonOccludedBadPixelsBounded) {
   const BadPixelRates rates = evaluateDisparity(disparity, scene);
   std::printf("tsukuba pm (window step 2): nonocc %.2f all %.2f disc %.2f %% in %.1f s\n", rates.nonocc, rates.all,
               rates.disc, seconds);
-  // 2.40 measured (full window, every pixel: 2.14); 2.68 when every invalid pixel took the background plane, before
-  // occlusions were told from mismatches and small isolated plane regions removed.
-  EXPECT_LT(rates.nonocc, 2.6);
-  EXPECT_LT(rates.all, 3.2);  // 2.72 measured (2.86 before)
+  // 2.10 measured (full window, every pixel: 1.86); 2.40 with the paper's 1 px left-right tolerance and no final
+  // median; 2.68 when every invalid pixel took the background plane, before occlusions were told from mismatches and
+  // small isolated plane regions removed.
+  EXPECT_LT(rates.nonocc, 2.3);
+  EXPECT_LT(rates.all, 2.8);  // 2.44 measured (2.72 before the tolerance and the median)
 }
 
 TEST(PatchMatchStereo, FillsHolesWithTheLowerNeighbouringPlane) {
