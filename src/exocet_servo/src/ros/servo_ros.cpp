@@ -344,6 +344,16 @@ bool ServoRos::onCaptureReference(std_srvs::Trigger::Request&, std_srvs::Trigger
     res.message = "no reference yet: need the right camera's image and depth map of one stamp and both camera_info";
     return true;
   }
+  if (config_.joints.enabled) {
+    // Without a joint state the first safety check would stop the servo at once: refuse until one arrives (the
+    // joint_states connection can come up after the image topics'), so the caller tries again.
+    std::lock_guard<std::mutex> lock(joint_mutex_);
+    if (!joint_state_) {
+      res.message = "no joint state received yet on " + joint_state_sub_.getTopic() +
+                    " (~safety/check_joints is on); try again";
+      return true;
+    }
+  }
   std::string error;
   const cv::Mat image = grayOf(*right_.image, &error);
   const cv::Mat depth = image.empty() ? cv::Mat() : depthOf(*right_.depth, &error);

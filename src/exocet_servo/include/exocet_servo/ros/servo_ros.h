@@ -15,7 +15,8 @@
  *  - in  `joint_states` (sensor_msgs/JointState): the arm's joint positions and velocities (safety checks).
  *  - in  tf: ~safety/world_frame -> the left camera's frame (the image's frame_id), for the workspace check.
  *  - out `/diagnostics`: ERROR with the reason after a safety stop.
- * Services: `~capture_reference` and `~stop` (std_srvs/Trigger).
+ * Services: `~capture_reference` and `~stop` (std_srvs/Trigger). A capture is refused (success false, the reason in
+ * the message) until both cameras' images and, with ~safety/check_joints, a joint state have arrived.
  *
  * Safety (control::ServoSafetyMonitor, the last line before each command): before a velocity is published it is
  * scaled to the speed limits, and the servo stops (zero velocity at once, ~status "safety stop: <check>: <what, the
