@@ -23,16 +23,17 @@
  * (within 0.7 px) are invalidated too (isolated wrong planes that pass the check, as in Venus' newspaper text); each
  * invalid pixel is classified as occluded or mismatched (classifyInvalidPixels(), after Hirschmueller's SGM) and takes
  * the plane of its nearest valid left or right neighbour evaluated at the pixel: the lower one if occluded (the
- * background, as in the paper), the one of lower matching cost if mismatched; then a colour-weighted median over the
- * filled pixels, as in the paper, except the mismatched ones whose cheaper plane was not the lower one. The paper
- * fills every invalid pixel with the background: at Teddy's and Cones' discontinuities that erased foreground pixels
- * whose right-view disparity alone was wrong (non-occluded bad pixels, Tsukuba / Venus / Teddy / Cones: 2.37 / 0.65 /
- * 4.07 / 2.74 with the paper's filling, 2.21 / 0.69 / 4.05 / 2.71 with the classification, 2.14 / 0.53 / 4.03 / 2.70
- * with the small regions removed as well). defaultConfigFor("pm") then departs from the paper twice: a left-right
- * tolerance of 0.75 px instead of 1 (the planes are sub-pixel) and a final 5x5 median of the filled map: 1.86 / 0.21
- * / 3.73 / 2.42 (on Venus the 5x5 median alone gives 0.25, 0.75 px with a 3x3 median 0.26). The shared
- * flags (left_right_check, left_right_tolerance_px, fill_holes, fill_median_radius_px, median_radius_px) switch the
- * steps.
+ * background, as in the paper); if mismatched, the one the right view confirms, else the higher one only when it
+ * costs 3 % less than the lower (fillHolesFromPlanes()); then a colour-weighted median over the filled pixels, as in
+ * the paper, except the mismatched ones given the higher plane. The paper fills every invalid pixel with the
+ * background: at Teddy's and Cones' discontinuities that erased foreground pixels whose right-view disparity alone
+ * was wrong (non-occluded bad pixels, Tsukuba / Venus / Teddy / Cones: 2.37 / 0.65 / 4.07 / 2.74 with the paper's
+ * filling, 2.21 / 0.69 / 4.05 / 2.71 with the classification, 2.14 / 0.53 / 4.03 / 2.70 with the small regions
+ * removed as well). defaultConfigFor("pm") then departs from the paper three times: a left-right tolerance of 0.75 px
+ * instead of 1 (the planes are sub-pixel) and a final 5x5 median of the filled map (1.86 / 0.21 / 3.73 / 2.42), and
+ * gradient differences truncated at 4 grey levels per pixel instead of 2 (2.00 / 0.33 / 3.02 / 2.29; with the right
+ * view's confirmation and the 3 % margin for mismatched pixels: 2.05 / 0.19 / 3.10 / 2.27). The shared flags
+ * (left_right_check, left_right_tolerance_px, fill_holes, fill_median_radius_px, median_radius_px) switch the steps.
  * Disparities are continuous by nature; with subpixel = false compute() rounds them to integers (integer ground truth).
  */
 #pragma once
@@ -68,16 +69,21 @@ using PlaneCost = std::function<float(int x, int y, const cv::Vec3f& plane)>;
 
 /**
  * @brief fillHolesFromPlanes() that tells occlusions from mismatches (`classes`, CV_8U InvalidPixelClass from
- *        classifyInvalidPixels()): an occluded pixel takes the lower of the two neighbouring planes (the background),
- *        a mismatched one the plane of lower `cost` at the pixel (its own surface may be the foreground). Empty
- *        `classes` treat every invalid pixel as occluded (the three-argument form).
+ *        classifyInvalidPixels()): an occluded pixel takes the lower of the two neighbouring planes (the background).
+ *        A mismatched one (visible in both views: its own surface may be the foreground) takes, of the two
+ *        neighbouring planes' disparities, the one that the right view confirms (`disparity_right` within 1 px where
+ *        that disparity lands) if only one is confirmed; otherwise the higher one only if its `cost` at the pixel is
+ *        below foreground_cost_ratio times the lower one's (near ties go to the background, as in the paper). Empty
+ *        `classes` treat every invalid pixel as occluded (the three-argument form); an empty `disparity_right` skips
+ *        the confirmation.
  * @param median_holes if not null, set to a CV_8U mask (255) of the filled pixels that the weighted median should
- *        still re-estimate: all but the mismatched pixels whose cheaper plane is not the lower one (there the cost
+ *        still re-estimate: all but the mismatched pixels given the higher plane (there the right view or the cost
  *        has decided against the background, which the median would bring back).
- * @throws std::invalid_argument on types or sizes that disagree.
+ * @throws std::invalid_argument on types or sizes that disagree, or a foreground_cost_ratio outside (0, 1].
  */
 cv::Mat fillHolesFromPlanes(const cv::Mat& disparity, const cv::Mat& planes, double max_disparity_px,
-                            const cv::Mat& classes, const PlaneCost& cost, cv::Mat* median_holes);
+                            const cv::Mat& classes, const PlaneCost& cost, cv::Mat* median_holes,
+                            const cv::Mat& disparity_right = cv::Mat(), double foreground_cost_ratio = 1.0);
 
 /**
  * @brief Invalidate (NaN) the small regions of `disparity` that no neighbour's plane continues: 4-neighbours are
