@@ -50,11 +50,14 @@ def sim_time(offset_s):
 
 
 def read_rows(path):
-    """Header and rows (lists of strings) of a CSV file; None if it does not exist."""
+    """Header and rows (lists of strings) of a CSV file; None if it does not exist or holds no header yet (the
+    logger creates the file before its first flush: CI once read it empty in between)."""
     if not os.path.exists(path):
         return None
     with open(path, newline='') as f:
         lines = list(csv.reader(f))
+    if not lines:
+        return None
     return lines[0], lines[1:]
 
 
