@@ -107,9 +107,9 @@ TEST(PatchMatchStereo, VenusLeftBorderBandIsMatched) {
 }
 
 TEST(PatchMatchStereo, TeddysSteepTexturedFloorIsMatched) {
-  // Teddy's bottom rows: a textured floor whose disparity grows ~0.7 px per row. With gradient differences truncated
-  // at the paper's 2 grey levels per pixel (our central differences), nearly every window pixel's gradient term
-  // saturated for the true plane as for wrong ones, and wrong planes won there.
+  // Teddy's bottom rows: a steep textured floor (disparity 27-53 px over the bottom 35 rows). With gradient differences
+  // truncated at the paper's 2 grey levels per pixel (our central differences), nearly every window pixel's gradient
+  // term saturated for the true plane as for wrong ones, and wrong planes won there.
   const MiddleburyScene scene = loadMiddleburyScene(kData + "teddy");
   const cv::Rect crop(0, scene.left.rows - 80, scene.left.cols, 80);
   DenseStereoConfig config = defaultConfigFor("pm", scene.max_disparity_px);
@@ -283,50 +283,53 @@ TEST(PatchMatchStereo, ClassifiesOcclusionsAndMismatches) {
 }
 
 TEST(PatchMatchStereo, MismatchedPixelsFollowTheRightViewThenAClearCostMargin) {
-  // One row: background plane d = 5 for x < 10, four mismatched pixels, foreground d = 15 from x = 14.
+  // One row: background plane d = 5 left of `first`, four mismatched pixels from `first`, foreground d = 15 after.
   constexpr int kCols = 40;
-  cv::Mat disparity(1, kCols, CV_32F), planes(1, kCols, CV_32FC3), classes(1, kCols, CV_8U, cv::Scalar(kPixelValid));
-  for (int x = 0; x < kCols; ++x) {
-    const float d = x < 10 ? 5.0f : 15.0f;
-    planes.at<cv::Vec3f>(0, x) = cv::Vec3f(0.0f, 0.0f, d);
-    disparity.at<float>(0, x) = x >= 10 && x < 14 ? std::numeric_limits<float>::quiet_NaN() : d;
-    if (x >= 10 && x < 14) classes.at<uint8_t>(0, x) = kPixelMismatch;
-  }
+  struct Row {
+    cv::Mat disparity, planes, classes;
+  };
+  const auto makeRow = [](int first) {
+    Row row{cv::Mat(1, kCols, CV_32F), cv::Mat(1, kCols, CV_32FC3), cv::Mat(1, kCols, CV_8U, cv::Scalar(kPixelValid))};
+    for (int x = 0; x < kCols; ++x) {
+      const float d = x < first ? 5.0f : 15.0f;
+      const bool mismatched = x >= first && x < first + 4;
+      row.planes.at<cv::Vec3f>(0, x) = cv::Vec3f(0.0f, 0.0f, d);
+      row.disparity.at<float>(0, x) = mismatched ? std::numeric_limits<float>::quiet_NaN() : d;
+      if (mismatched) row.classes.at<uint8_t>(0, x) = kPixelMismatch;
+    }
+    return row;
+  };
   const auto costs = [](float foreground, float background) {
     return PlaneCost(
         [foreground, background](int, int, const cv::Vec3f& p) { return p[2] > 10 ? foreground : background; });
   };
-  // The right view's disparity where each candidate lands: x - 5 in [5, 9), x - 15 in [-5, -1) (outside: unconfirmed)
-  // for this row; a second map confirms the foreground instead, landing at x + 5 - 15 after a shift of the row.
-  const cv::Mat no_right;
-  cv::Mat right_confirms_background(1, kCols, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
-  for (int xr = 5; xr < 9; ++xr) right_confirms_background.at<float>(0, xr) = 5.0f;
-  const auto filledAt = [&](const PlaneCost& cost, const cv::Mat& right, double ratio, cv::Mat* holes) {
-    return fillHolesFromPlanes(disparity, planes, 64.0, classes, cost, holes, right, ratio).at<float>(0, 11);
+  // The right view's disparity map, NaN but for `value` over [begin, end).
+  const auto rightMap = [](int begin, int end, float value) {
+    cv::Mat right(1, kCols, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+    right.colRange(begin, end).setTo(cv::Scalar(value));
+    return right;
   };
+  const Row row = makeRow(10);
+  const cv::Mat no_right;
   cv::Mat holes;
-  EXPECT_FLOAT_EQ(filledAt(costs(0.5f, 1.0f), no_right, 0.97, &holes), 15.0f) << "clearly cheaper foreground";
+  const auto filledAt = [&](const PlaneCost& cost, const cv::Mat& right, double ratio) {
+    return fillHolesFromPlanes(row.disparity, row.planes, 64.0, row.classes, cost, &holes, right, ratio)
+        .at<float>(0, 11);
+  };
+  EXPECT_FLOAT_EQ(filledAt(costs(0.5f, 1.0f), no_right, 0.97), 15.0f) << "clearly cheaper foreground";
   EXPECT_EQ(holes.at<uint8_t>(0, 11), 0) << "kept out of the weighted median";
-  EXPECT_FLOAT_EQ(filledAt(costs(0.99f, 1.0f), no_right, 0.97, &holes), 5.0f) << "a near tie goes to the background";
+  EXPECT_FLOAT_EQ(filledAt(costs(0.99f, 1.0f), no_right, 0.97), 5.0f) << "a near tie goes to the background";
   EXPECT_EQ(holes.at<uint8_t>(0, 11), 255);
-  EXPECT_FLOAT_EQ(filledAt(costs(0.99f, 1.0f), no_right, 1.0, &holes), 15.0f) << "ratio 1: the cheaper plane";
-  EXPECT_FLOAT_EQ(filledAt(costs(0.5f, 1.0f), right_confirms_background, 0.97, &holes), 5.0f)
+  EXPECT_FLOAT_EQ(filledAt(costs(0.99f, 1.0f), no_right, 1.0), 15.0f) << "ratio 1: the cheaper plane";
+  // Mismatched x = 10..13: the background lands at x - 5 = 5..8 (confirmed there), the foreground at x - 15 < 0.
+  EXPECT_FLOAT_EQ(filledAt(costs(0.5f, 1.0f), rightMap(5, 9, 5.0f), 0.97), 5.0f)
       << "the right view confirms only the background";
-  // Foreground confirmed: a row where x - 15 lands inside the right view (pixels at x = 30..33 mismatched).
-  cv::Mat d2 = disparity.clone(), c2 = classes.clone(), p2 = planes.clone();
-  c2.setTo(cv::Scalar(kPixelValid));
-  for (int x = 0; x < kCols; ++x) {
-    const float d = x < 30 ? 5.0f : 15.0f;
-    p2.at<cv::Vec3f>(0, x) = cv::Vec3f(0.0f, 0.0f, d);
-    d2.at<float>(0, x) = x >= 30 && x < 34 ? std::numeric_limits<float>::quiet_NaN() : d;
-    if (x >= 30 && x < 34) c2.at<uint8_t>(0, x) = kPixelMismatch;
-  }
-  cv::Mat right_confirms_foreground(1, kCols, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
-  for (int xr = 15; xr < 19; ++xr) right_confirms_foreground.at<float>(0, xr) = 15.0f;
-  const cv::Mat filled =
-      fillHolesFromPlanes(d2, p2, 64.0, c2, costs(1.0f, 1.0f), &holes, right_confirms_foreground, 0.97);
+  // Mismatched x = 30..33: the foreground lands at x - 15 = 15..18 (confirmed there), the background at 25..28 (NaN).
+  const Row far = makeRow(30);
+  const cv::Mat filled = fillHolesFromPlanes(far.disparity, far.planes, 64.0, far.classes, costs(1.0f, 1.0f), &holes,
+                                             rightMap(15, 19, 15.0f), 0.97);
   for (int x = 30; x < 34; ++x) EXPECT_FLOAT_EQ(filled.at<float>(0, x), 15.0f) << "foreground confirmed, x " << x;
-  EXPECT_THROW(fillHolesFromPlanes(disparity, planes, 64.0, classes, costs(1, 1), &holes, no_right, 1.5),
+  EXPECT_THROW(fillHolesFromPlanes(row.disparity, row.planes, 64.0, row.classes, costs(1, 1), &holes, no_right, 1.5),
                std::invalid_argument);
 }
 
