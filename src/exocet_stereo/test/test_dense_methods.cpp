@@ -1,5 +1,6 @@
 // Dense stereo methods: synthetic random-dot pairs with known disparity, Tsukuba bad-pixel bounds, bad input.
 // (Graph cuts, the slowest, is tested on Tsukuba in test_dense_graph_cut.cpp.)
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -13,6 +14,7 @@
 
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
+#include "exocet_stereo/dense/post_processing.h"
 #include "exocet_stereo/io/pfm.h"
 
 namespace {
@@ -116,6 +118,38 @@ TEST_P(DenseMethod, TsukubaBadPixelsUnderBound) {
 
 INSTANTIATE_TEST_SUITE_P(AllButGraphCuts, DenseMethod, testing::Values("ssd", "dp", "so", "sgm", "bd", "sgbm"),
                          [](const testing::TestParamInfo<std::string>& info) { return info.param; });
+
+// The weighted median that re-estimates filled pixels must give a slanted surface back where the image border cuts its
+// window: a one-sided window took Teddy's steep floor (0.9 px per row) from rows above, 7 px off at the bottom row.
+TEST(WeightedMedianFill, KeepsASteepSlantedSurfaceAtTheImageBorders) {
+  const int rows = 60, cols = 80, radius_px = 17;
+  cv::Mat ramp(rows, cols, CV_32F);
+  for (int y = 0; y < rows; ++y)
+    for (int x = 0; x < cols; ++x) ramp.at<float>(y, x) = 10.0f + 0.9f * y + 0.3f * x;
+  const cv::Mat guide(rows, cols, CV_8UC3, cv::Scalar(90, 120, 150));  // one colour: every neighbour weighs the same
+  cv::Mat holes(rows, cols, CV_8U, cv::Scalar(0));
+  // Filled pixels weigh half as much as the others, so each hole pattern is itself symmetric about its pixels: the bias
+  // tested is the window's alone.
+  holes.row(rows - 1).setTo(255);  // bottom row
+  holes.col(0).setTo(255);         // left column
+  holes.at<uint8_t>(25, 35) = 255;  // one interior pixel
+  const cv::Mat out = weightedMedianFill(ramp, holes, guide, radius_px, 10.0);
+  double worst_px = 0.0;
+  for (int y = 0; y < rows; ++y)
+    for (int x = 0; x < cols; ++x)
+      worst_px = std::max(worst_px, std::fabs(static_cast<double>(out.at<float>(y, x) - ramp.at<float>(y, x))));
+  EXPECT_LT(worst_px, 1e-3) << "the weighted median moved a pixel of a plane by " << worst_px << " px";
+  // Non-hole pixels are never changed, and a hole in a step edge still takes the side its colour belongs to.
+  cv::Mat step(rows, cols, CV_32F, cv::Scalar(5.0f)), step_guide(rows, cols, CV_8UC3, cv::Scalar(40, 40, 40));
+  step.colRange(40, cols).setTo(25.0f);
+  step_guide.colRange(40, cols).setTo(cv::Scalar(200, 200, 200));
+  cv::Mat step_holes(rows, cols, CV_8U, cv::Scalar(0));
+  step_holes(cv::Rect(36, rows - 1, 8, 1)).setTo(255);
+  step.at<float>(rows - 1, 41) = 5.0f;  // a bright pixel filled with the dark side's value
+  const cv::Mat step_out = weightedMedianFill(step, step_holes, step_guide, radius_px, 10.0);
+  EXPECT_FLOAT_EQ(step_out.at<float>(rows - 1, 41), 25.0f);
+  EXPECT_FLOAT_EQ(step_out.at<float>(rows - 1, 38), 5.0f);
+}
 
 TEST(DenseStereoInput, RejectsBadImagesWithReasons) {
   auto matcher = createDenseStereo("ssd", defaultConfigFor("ssd", 16));

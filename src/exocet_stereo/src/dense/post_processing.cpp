@@ -159,11 +159,14 @@ cv::Mat weightedMedianFill(const cv::Mat& filled, const cv::Mat& holes, const cv
       const uint8_t* centre = guide.ptr<uint8_t>(y) + x * channels;
       samples.clear();
       float total = 0.0f;
-      for (int v = std::max(0, y - radius_px); v <= std::min(filled.rows - 1, y + radius_px); ++v) {
+      // Symmetric about (x, y) even at the border, so that a linear surface gives back its own value.
+      const int radius_y = std::min({radius_px, y, filled.rows - 1 - y});
+      const int radius_x = std::min({radius_px, x, filled.cols - 1 - x});
+      for (int v = y - radius_y; v <= y + radius_y; ++v) {
         const float* d_row = filled.ptr<float>(v);
         const uint8_t* g_row = guide.ptr<uint8_t>(v);
         const uint8_t* h_row = holes.ptr<uint8_t>(v);
-        for (int u = std::max(0, x - radius_px); u <= std::min(filled.cols - 1, x + radius_px); ++u) {
+        for (int u = x - radius_x; u <= x + radius_x; ++u) {
           if (!std::isfinite(d_row[u])) continue;
           int distance = 0;
           for (int c = 0; c < channels; ++c) distance += std::abs(g_row[u * channels + c] - centre[c]);
