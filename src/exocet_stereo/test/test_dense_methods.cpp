@@ -130,8 +130,8 @@ TEST(WeightedMedianFill, KeepsASteepSlantedSurfaceAtTheImageBorders) {
   cv::Mat holes(rows, cols, CV_8U, cv::Scalar(0));
   // Filled pixels weigh half as much as the others, so each hole pattern is itself symmetric about its pixels: the bias
   // tested is the window's alone.
-  holes.row(rows - 1).setTo(255);  // bottom row
-  holes.col(0).setTo(255);         // left column
+  holes.row(rows - 1).setTo(255);   // bottom row
+  holes.col(0).setTo(255);          // left column
   holes.at<uint8_t>(25, 35) = 255;  // one interior pixel
   const cv::Mat out = weightedMedianFill(ramp, holes, guide, radius_px, 10.0);
   double worst_px = 0.0;
