@@ -32,9 +32,11 @@
  * removed as well). defaultConfigFor("pm") then departs from the paper three times: a left-right tolerance of 0.75 px
  * instead of 1 (the planes are sub-pixel) and a final 5x5 median of the filled map (1.86 / 0.21 / 3.73 / 2.42), and
  * gradient differences truncated at 4 grey levels per pixel instead of 2 (2.00 / 0.33 / 3.02 / 2.29; with the right
- * view's confirmation and the 3 % margin for mismatched pixels: 2.05 / 0.19 / 3.10 / 2.27). The shared flags
- * (left_right_check, left_right_tolerance_px, fill_holes, fill_median_radius_px, median_radius_px) switch the steps.
- * Disparities are continuous by nature; with subpixel = false compute() rounds them to integers (integer ground truth).
+ * view's confirmation and the 3 % margin for mismatched pixels: 2.05 / 0.19 / 3.10 / 2.27; with the weighted median's
+ * window kept symmetric where the image border cuts it, weightedMedianFill(): 2.05 / 0.19 / 2.74 / 2.27). The shared
+ * flags (left_right_check, left_right_tolerance_px, fill_holes, fill_median_radius_px, median_radius_px) switch the
+ * steps. Disparities are continuous by nature; with subpixel = false compute() rounds them to integers (integer ground
+ * truth).
  */
 #pragma once
 
