@@ -1,6 +1,9 @@
 // bench_stereo: every dense method on the four Middlebury v2 scenes; bad-pixel rates (> 1 px) and single-thread
 // wall time (--threads N for more). Writes <output-dir>/stereo.json as
-// {"method": {"scene": {"nonocc", "all", "disc", "ms"}}}.
+// {"method": {"scene": {"nonocc", "all", "disc", "ms"}}}, and, for PatchMatch's random draws, "pm_seeds":
+// {"scene": {"seeds", "nonocc", "nonocc_mean", "nonocc_max"}} over --pm-seeds (untimed, on every core: the result
+// does not depend on the thread count).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -41,8 +44,10 @@ int usage(const std::string& error) {
   std::cerr << "bench_stereo: " << error << "\n"
             << "usage: bench_stereo [--output-dir DIR] [--shared-data DIR] [--methods ssd,dp,...] "
                "[--scenes tsukuba,...] [--repeat N] [--threads N] [--pm-seed N]\n"
+               "       [--pm-seeds 1,2,...]\n"
             << "  --threads: OpenCV threads (default 1: single-core timings; 0: OpenCV's default)\n"
-            << "  --pm-seed: seed of PatchMatch's random draws (default 1)\n";
+            << "  --pm-seed: seed of PatchMatch's random draws (default 1)\n"
+            << "  --pm-seeds: seeds of the pm seed study (default 1,2,3,4,5; one seed: no study)\n";
   return 2;
 }
 
@@ -56,6 +61,7 @@ int main(int argc, char** argv) {
   int repeat = 3;   // timing: best of N runs for the fast methods (one run when a run exceeds a second)
   int threads = 1;  // single-core timings for every method, OpenCV's SGBM included
   int pm_seed = 1;  // PatchMatch's random draws: its rates move by a few tenths of a point with the seed on Teddy
+  std::vector<int> pm_seeds = {1, 2, 3, 4, 5};  // seed study: one published run is one draw
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (i + 1 >= argc) return usage("option " + arg + " needs a value");
@@ -74,7 +80,10 @@ int main(int argc, char** argv) {
       threads = std::max(0, std::atoi(value.c_str()));
     else if (arg == "--pm-seed")
       pm_seed = std::atoi(value.c_str());
-    else
+    else if (arg == "--pm-seeds") {
+      pm_seeds.clear();
+      for (const auto& item : splitCommas(value)) pm_seeds.push_back(std::atoi(item.c_str()));
+    } else
       return usage("unknown option " + arg);
   }
   if (threads > 0) cv::setNumThreads(threads);
@@ -118,6 +127,45 @@ int main(int argc, char** argv) {
         std::snprintf(entry, sizeof(entry), "\"%s\": {\"nonocc\": %.3f, \"all\": %.3f, \"disc\": %.3f, \"ms\": %.1f}",
                       scene.name.c_str(), rates.nonocc, rates.all, rates.disc, best_ms);
         json << (s ? ", " : "") << entry;
+      }
+      json << "}";
+    }
+    const bool study = pm_seeds.size() > 1 && std::find(methods.begin(), methods.end(), "pm") != methods.end();
+    if (study) {
+      cv::setNumThreads(0);  // untimed: every core
+      std::printf("pm seed study (non-occluded bad pixels %%), seeds");
+      for (int seed : pm_seeds) std::printf(" %d", seed);
+      std::printf("\n");
+      json << ",\n  \"pm_seeds\": {";
+      for (size_t s = 0; s < loaded.size(); ++s) {
+        const MiddleburyScene& scene = loaded[s];
+        DenseStereoConfig config = defaultConfigFor("pm", scene.max_disparity_px);
+        config.subpixel = hasFractionalDisparity(scene.ground_truth_px);  // as in the table above
+        std::vector<double> nonocc;
+        for (int seed : pm_seeds) {
+          config.pm_seed = seed;
+          nonocc.push_back(
+              evaluateDisparity(createDenseStereo("pm", config)->compute(scene.left, scene.right), scene).nonocc);
+        }
+        double mean = 0.0;
+        for (double v : nonocc) mean += v / nonocc.size();
+        const double worst = *std::max_element(nonocc.begin(), nonocc.end());
+        std::printf("%-8s", scene.name.c_str());
+        for (double v : nonocc) std::printf(" %6.3f", v);
+        std::printf("   mean %6.3f  max %6.3f\n", mean, worst);
+        std::fflush(stdout);
+        json << (s ? ", " : "") << "\"" << scene.name << "\": {\"seeds\": [";
+        for (size_t k = 0; k < pm_seeds.size(); ++k) json << (k ? ", " : "") << pm_seeds[k];
+        json << "], \"nonocc\": [";
+        char number[32];
+        for (size_t k = 0; k < nonocc.size(); ++k) {
+          std::snprintf(number, sizeof(number), "%.3f", nonocc[k]);
+          json << (k ? ", " : "") << number;
+        }
+        std::snprintf(number, sizeof(number), "%.3f", mean);
+        json << "], \"nonocc_mean\": " << number;
+        std::snprintf(number, sizeof(number), "%.3f", worst);
+        json << ", \"nonocc_max\": " << number << "}";
       }
       json << "}";
     }
