@@ -132,7 +132,7 @@ int main(int argc, char** argv) {
     }
     const bool study = pm_seeds.size() > 1 && std::find(methods.begin(), methods.end(), "pm") != methods.end();
     if (study) {
-      cv::setNumThreads(0);  // untimed: every core
+      cv::setNumThreads(-1);  // untimed: OpenCV's default, every core (0 would mean sequential)
       std::printf("pm seed study (non-occluded bad pixels %%), seeds");
       for (int seed : pm_seeds) std::printf(" %d", seed);
       std::printf("\n");
