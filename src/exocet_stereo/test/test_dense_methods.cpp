@@ -139,7 +139,7 @@ TEST(WeightedMedianFill, KeepsASteepSlantedSurfaceAtTheImageBorders) {
     for (int x = 0; x < cols; ++x)
       worst_px = std::max(worst_px, std::fabs(static_cast<double>(out.at<float>(y, x) - ramp.at<float>(y, x))));
   EXPECT_LT(worst_px, 1e-3) << "the weighted median moved a pixel of a plane by " << worst_px << " px";
-  // Non-hole pixels are never changed, and a hole in a step edge still takes the side its colour belongs to.
+  // The colour weights still decide at a step edge: each hole takes the side its colour belongs to.
   cv::Mat step(rows, cols, CV_32F, cv::Scalar(5.0f)), step_guide(rows, cols, CV_8UC3, cv::Scalar(40, 40, 40));
   step.colRange(40, cols).setTo(25.0f);
   step_guide.colRange(40, cols).setTo(cv::Scalar(200, 200, 200));
