@@ -6,6 +6,11 @@ export PATH := /usr/bin:/bin:/usr/sbin:/sbin:$(PATH)
 export ROS_HOME ?= $(CURDIR)/out/ros
 JOBS ?= $(shell nproc)
 BUILD_TYPE ?= Release
+# ccache (installed by tools/install-deps.sh) makes a rebuild, CI's fresh clone included, cost what changed only;
+# paths under the workspace are hashed relative to it, so that other clones share the cache.
+export CCACHE_BASEDIR := $(CURDIR)
+CCACHE := $(shell command -v ccache 2>/dev/null)
+LAUNCHER := $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=$(CCACHE))
 
 .PHONY: all deps build bags demo test bench format clean
 all: build
@@ -15,7 +20,7 @@ deps:
 
 build: deps
 	@mkdir -p out
-	catkin_make -j$(JOBS) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DCATKIN_ENABLE_TESTING=ON
+	catkin_make -j$(JOBS) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DCATKIN_ENABLE_TESTING=ON $(LAUNCHER)
 
 # The sample dives, made deterministically by the project's simulator (not committed).
 bags: build
