@@ -20,4 +20,5 @@ for bench in devel/lib/*/bench_*; do
   fi
 done
 echo "Figures: $(ls out/bench/*.json 2>/dev/null | tr '\n' ' ')"
+python3 tools/make-benchmarks-doc.py --bench-dir out/bench --output docs/benchmarks.md || status=1
 exit $status

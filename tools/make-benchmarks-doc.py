@@ -1,0 +1,974 @@
+#!/usr/bin/env python3
+"""Writes docs/benchmarks.md from the benchmarks' JSON files (out/bench/*.json, written by `make bench`).
+
+usage: make-benchmarks-doc.py [--bench-dir out/bench] [--output docs/benchmarks.md]
+
+For each benchmark the page gives what it measures, on which data, how each figure is computed and its target (the
+texts below, in BENCHMARKS), then the figures of its JSON file as tables. A JSON file without a description gets a
+generic section; a described benchmark whose file is missing gets a line saying it was not run. The date shown is
+the file's modification time, unless the file holds a string "_measured_on"; a string "_note" is printed above the
+figures. Other keys beginning with "_" are not figures.
+
+Exit status: 0 written; 1 written, but a JSON file could not be read (the page says which); 2 bad argument.
+Standard library only.
+"""
+import argparse
+import datetime
+import fnmatch
+import glob
+import json
+import math
+import os
+import sys
+import tempfile
+
+# ---------------------------------------------------------------------------------------------------------------
+# What each benchmark measures. Keyed by the JSON file's name, in the order of the page.
+#   title, command, measures, data, method (list of paragraphs), targets (list), references (list, optional),
+#   figures: [(pattern, meaning)]: the first fnmatch pattern matching a figure's dotted key (or, inside a table of
+#            records, its column name) gives the meaning printed beside it;
+#   omit: fnmatch patterns of dotted keys not shown (bulky per-item lists kept in the JSON file only);
+#   groups: {top-level key: caption} for the tables of records.
+
+BENCHMARKS = {
+    'dive_synth.json': {
+        'title': 'Dive simulator rendering speed',
+        'command': 'devel/lib/exocet_mosaic/bench_dive_synth --output-dir out/bench',
+        'measures': 'How many frames per second `dive_synth` renders on one thread, the seabed texture tiles '
+                    'generated along the track included. Frames are rendered and dropped: the disk is not measured.',
+        'data': 'A simulated out-and-back dive (60 m line at 0.5 m/s, 10 frames/s) with the sample dive\'s '
+                'underwater effects: lamp cone 0.7, vignetting 0.4, attenuation [0.3, 0.1, 0.08] per metre, '
+                'backscatter 0.15, read noise 2 DN, marine snow 15 particles per cubic metre. PAL (720x576) and HD '
+                '(1920x1080) cameras, each over a flat seabed and over a seabed with relief (per-pixel ray casting).',
+        'method': ['Wall-clock time of `DiveSynthesizer::run` over 150 PAL or 40 HD frames, one rendering thread.'],
+        'targets': ['None: the figure tells how long `make bags` and the benchmarks\' dives take to render.'],
+        'figures': [
+            ('fps_pal', 'frames/s, 720x576, flat seabed'),
+            ('fps_pal_relief', 'frames/s, 720x576, seabed with relief'),
+            ('fps_hd', 'frames/s, 1920x1080, flat seabed'),
+            ('fps_hd_relief', 'frames/s, 1920x1080, seabed with relief'),
+            ('frames_pal', 'frames rendered per PAL run'),
+            ('frames_hd', 'frames rendered per HD run'),
+            ('threads', 'rendering threads'),
+        ],
+    },
+    'registration.json': {
+        'title': 'Frame-to-frame registration',
+        'command': 'devel/lib/exocet_mosaic/bench_registration --output-dir out/bench --shared-data ../shared/data '
+                   '[--only accuracy,peers,speed] [--methods klt,rmr,...]; '
+                   'devel/lib/exocet_mosaic/bench_registration_node (the node as a process)',
+        'measures': 'Accuracy, robustness, covariance consistency and speed of the registration methods (KLT, RMR, '
+                    'auto) of `exocet_mosaic`, beside two OpenCV pipelines; agreement with a SIFT reference on real '
+                    'seabed images; memory and throughput of `registration_node` as a process.',
+        'data': 'Simulated: `config/dives/bench_registration.yaml`, 2000 PAL frames (720x576, 25 frames/s, 80 s) '
+                'over a flat seabed at 2.5 m altitude (altitude varying by 0.3 m), an out-and-back line with a '
+                'U-turn, roll and pitch oscillating by 2 degrees, lamp cone, vignetting, colour attenuation, '
+                'backscatter, read and shot noise, marine snow (20 particles per cubic metre), a turbid stretch '
+                '(15-30 s, turbidity 3) and a dark one (45-55 s, light gain 0.3). The seabed is flat, so the true '
+                'motion between two frames is exactly the seabed plane\'s homography, computed from the simulator\'s '
+                'camera poses. The HD speed uses the first 12 s of the same dive rendered at 1920x1080. '
+                'Real: the 22 frames (384x288) of the Sparus II AUV sample (`../shared/data/sparus_auv`), undistorted '
+                'with the dataset\'s intrinsics. The node figures replay `bags/sample_out_and_back.bag` (JPEG, PAL).',
+        'method': [
+            'Corner-transfer error: for each image pair, the largest distance (px) between where the estimated and '
+            'the true motion send the four image corners. Median and p95 are over the pairs the method did not '
+            'report as failed. A failure is a pair the method reports as failed; a gross failure is a pair not '
+            'reported as failed whose error exceeds 2 px. Rates are fractions of the 1999 pairs (0.005 = 0.5 %).',
+            'Each method runs over the whole sequence with `registerNext`, the previous motion as the starting '
+            'guess, with illumination normalisation. Keys without a suffix (`klt_*`, `rmr_*`, `auto_*`) use the '
+            'homography model; `*_similarity` and `*_affine` the other models. The dark and turbid medians are the '
+            'same run scored on those stretches only.',
+            'NEES ratio: median over the pairs of the corner NEES (errors weighed by the reported covariance) '
+            'divided by its expectation for a right covariance; 1 is consistent, above 1 the covariance is too '
+            'small.',
+            'Peers: OpenCV `findTransformECC` (affine, 3-level pyramid) and ORB (1000 features) + '
+            '`estimateAffinePartial2D` (RANSAC), on every 5th pair (every 50th for ECC\'s HD speed).',
+            'Speed: `registerNext` on 300 frames (12 s) of the dive, repeated for at least 2-3 s of wall time, one '
+            'thread (`cv::setNumThreads(1)`), illumination normalisation included; `*_fps_*` is wall-clock, '
+            '`*_fps_*_cpu` per second of the thread\'s CPU time. `klt_fps_pal` and `rmr_fps_pal` use the '
+            'similarity model, `*_homography_fps_*` the homography. On a shared machine the wall-clock rate varies '
+            'with the load; the CPU rate much less.',
+            'Sparus: every consecutive pair registered (homography) and compared, by the same corner distance, with '
+            'a SIFT + RANSAC (MAGSAC++) homography of the same pair.',
+            'Node: `registration_node` with `config/registration/pal_survey.yaml` on a private ROS master; the '
+            'bag\'s compressed images played at `node_replay_rate` times real time; peak resident memory (VmHWM) '
+            'and motions published per second, JPEG decoding included.',
+        ],
+        'targets': [
+            'KLT at least 400 frames/s on PAL and 150 on HD; RMR at least 100 and 30 (one thread).',
+            'Median error at most 0.1 px, p95 at most 0.5 px, gross failures at most 0.5 % (homography model).',
+            'The similarity and affine models cannot meet them on this dive: a rolling and pitching camera sees '
+            'perspective, which only the homography holds. The mosaic chain (`launch/mosaic_chain.launch`) '
+            'registers with the homography for that reason.',
+        ],
+        'figures': [
+            ('*_dark_median_px', 'median corner error (px) in the dark stretch'),
+            ('*_turbid_median_px', 'median corner error (px) in the turbid stretch'),
+            ('sparus_*_max_corner_px', 'Sparus: largest corner difference to SIFT + RANSAC (px)'),
+            ('sparus_*_median_corner_px', 'Sparus: median corner difference to SIFT + RANSAC (px)'),
+            ('sparus_*_failures', 'Sparus: pairs reported as failed'),
+            ('sparus_max_corner_px', 'Sparus: largest corner difference of KLT and RMR (px)'),
+            ('*_median_px', 'median corner-transfer error (px)'),
+            ('*_p95_px', '95th percentile of the corner-transfer error (px)'),
+            ('*_gross_failure_rate', 'fraction of pairs with an unreported error > 2 px'),
+            ('*_failure_rate', 'fraction of pairs reported as failed'),
+            ('*_nees_ratio', 'covariance consistency (1 = right, > 1 = too small)'),
+            ('*_fps_pal_cpu', 'frames per CPU second, 720x576, one thread'),
+            ('*_fps_hd_cpu', 'frames per CPU second, 1920x1080, one thread'),
+            ('node_fps_pal', 'registration_node: motions published per second (PAL, JPEG)'),
+            ('node_peak_rss_mb', 'registration_node: peak resident memory (MB)'),
+            ('node_replay_rate', 'registration_node run: replay speed (x real time)'),
+            ('*_fps_pal', 'frames/s wall-clock, 720x576, one thread'),
+            ('*_fps_hd', 'frames/s wall-clock, 1920x1080, one thread'),
+            ('dive_pairs', 'image pairs scored'),
+        ],
+    },
+    'fusion.json': {
+        'title': 'Navigation fusion',
+        'command': 'devel/lib/exocet_mosaic/bench_fusion --output-dir out/bench [--monte-carlo RUNS] '
+                   '[--filter NAME=VALUE]... [--monte-carlo-set navigation.KEY=VALUE]... [--no-cross-pass]',
+        'measures': 'Position accuracy and consistency of the navigation filter (image motion, dead reckoning, USBL) '
+                    'and of its Rauch-Tung-Striebel smoother, against each source alone: the out-and-back '
+                    'experiment of the 2D3 report\'s figure 5.',
+        'data': '`config/dives/bench_fusion.yaml`: a 50 m line flown out and back at 0.4 m/s over a flat seabed, '
+                'PAL camera at 5 frames/s, 2.5 m altitude (varying by 0.15 m), roll and pitch oscillating by 1 and '
+                '1.5 degrees; USBL fixes of 0.5 m (1-sigma) at 1 Hz arriving 1.5 s late, 3 % outliers (10 times the '
+                'noise) and a 40 s dropout on the way back (180-220 s); dead reckoning from gyro and DVL with the '
+                'simulator\'s default drift; heading alignment error 2 mrad at launch. Ground truth: the simulator\'s '
+                'camera centre at every frame.',
+        'method': [
+            'The simulator runs in-process; consecutive frames are registered (homography, method auto), converted '
+            'to metres (attitude from the IMU, height from the altimeter, the camera\'s lever arm) and fed with the '
+            'dead reckoning and the late USBL fixes, in arrival order, to the filter; the RTS smoother runs over '
+            'the whole dive. Every track is scored against the true camera centre at the image stamps.',
+            'The filter is configured from the simulated sensors\' specifications (gyro noise and bias, DVL noise and '
+            'scale error), as an operator would from datasheets (`filterConfigForSensors`). The image step noise '
+            'along and across each step\'s motion is calibrated from the registration\'s error against the '
+            'simulator\'s truth, as one calibrates a sensor (`image_step_noise_calibrated_*`).',
+            'RMSE: root mean square horizontal position error (m). "Better single source" is the smaller RMSE of '
+            'dead reckoning alone and USBL alone; `filtered_over_better_single_source` is the filtered RMSE (all '
+            'sources) divided by it.',
+            'Return misalignment: for each image of the return pass and the nearest image of the outbound pass, the '
+            'error of their estimated relative position, in ground sample distances (GSD, the pixel size on the '
+            'seabed); median and p95 over those pairs. Cross-pass constraints: SIFT matches between the passes '
+            'added to the smoothed track in a Ceres batch adjustment.',
+            'Consistency (NEES, normalised estimation error squared, 2 degrees of freedom): Monte Carlo over the '
+            'navigation sensors (`nees_monte_carlo_runs` runs re-drawing gyro, DVL, altimeter, attitude, heading '
+            'alignment and USBL noise and the focal length, along the same images); at each epoch the NEES averaged '
+            'over the runs is compared with the 95 % chi-square bounds for that many runs '
+            '(`nees_monte_carlo_bounds_low/high`). Per axis: along and across the track, 1 degree of freedom each. '
+            '`monte_carlo_common_error_fraction`: squared mean error over mean squared error (1 / runs for '
+            'independent runs). The single rendered dive\'s NEES (`nees_mean`, bounds [0.0506, 7.38]) is one '
+            'realisation with strongly correlated epochs: the Monte Carlo is the test.',
+        ],
+        'targets': [
+            'Filtered / better single source at most 0.5.',
+            'Return-pass misalignment (p95, `return_misalignment_gsd`) at most 3 GSD.',
+            'At least 95 % of the epochs within the Monte Carlo NEES bounds.',
+        ],
+        'figures': [
+            ('rmse_image_only_m', 'image motion alone from the true start: RMSE (m)'),
+            ('rmse_nav_only_m', 'dead reckoning alone: RMSE (m)'),
+            ('rmse_usbl_only_m', 'USBL fixes alone, at their stamps: RMSE (m)'),
+            ('rmse_usbl_only_inliers_m', 'USBL fixes without the outliers (> 4 sigma): RMSE (m)'),
+            ('rmse_nav_filter_m', 'filter, dead reckoning + USBL: RMSE (m)'),
+            ('rmse_nav_smoothed_m', 'RTS smoother, dead reckoning + USBL: RMSE (m)'),
+            ('rmse_filtered_m', 'filter, all sources: RMSE (m)'),
+            ('rmse_filtered_live_m', 'filter, all sources, as published live (before late fixes): RMSE (m)'),
+            ('rmse_smoothed_m', 'RTS smoother, all sources: RMSE (m)'),
+            ('rmse_cross_pass_m', 'RTS + cross-pass constraints: RMSE (m)'),
+            ('filtered_over_better_single_source', 'filtered RMSE / better single source (target <= 0.5)'),
+            ('return_misalignment_gsd', 'return-pass misalignment p95 of the best track (GSD; target <= 3)'),
+            ('return_misalignment_gsd_*_median', 'return-pass misalignment, median (GSD)'),
+            ('return_misalignment_gsd_*_p95', 'return-pass misalignment, p95 (GSD)'),
+            ('return_pairs', 'return / outbound image pairs compared'),
+            ('nees_in_bounds_fraction', 'Monte Carlo: fraction of epochs within the 95 % NEES bounds (target >= 0.95)'),
+            ('nees_monte_carlo_runs', 'Monte Carlo runs'),
+            ('nees_monte_carlo_mean', 'Monte Carlo NEES, mean over the epochs (2 expected)'),
+            ('nees_monte_carlo_along_track_mean', 'Monte Carlo NEES along the track, mean (1 expected)'),
+            ('nees_monte_carlo_cross_track_mean', 'Monte Carlo NEES across the track, mean (1 expected)'),
+            ('nees_monte_carlo_bounds_*', '95 % bounds of the run-averaged NEES'),
+            ('nees_monte_carlo_below_fraction', 'fraction of epochs below the bounds (covariance too large)'),
+            ('nees_monte_carlo_above_fraction', 'fraction of epochs above the bounds (covariance too small)'),
+            ('monte_carlo_common_error_fraction', 'error common to the runs (1 / runs if independent)'),
+            ('monte_carlo_rmse_filtered_mean_m', 'Monte Carlo: filtered RMSE, mean (m)'),
+            ('monte_carlo_rmse_nav_only_mean_m', 'Monte Carlo: dead reckoning RMSE, mean (m)'),
+            ('monte_carlo_filtered_over_better_single_mean', 'Monte Carlo: filtered / better single source, mean'),
+            ('monte_carlo_filtered_over_better_single_p90', 'Monte Carlo: filtered / better single source, p90'),
+            ('monte_carlo_seconds', 'Monte Carlo wall time (s)'),
+            ('nees_single_dive_in_bounds_fraction', 'rendered dive: fraction of epochs with NEES in [0.0506, 7.38]'),
+            ('nees_mean', 'rendered dive: mean NEES of the filter (2 expected)'),
+            ('nees_smoothed_mean', 'rendered dive: mean NEES of the smoother'),
+            ('nees_below_fraction', 'rendered dive: fraction of epochs below 0.0506'),
+            ('nees_above_fraction', 'rendered dive: fraction of epochs above 7.38'),
+            ('image_step_noise_calibrated_along_m', 'image step noise along the motion, calibrated (m)'),
+            ('image_step_noise_calibrated_across_m', 'image step noise across the motion, calibrated (m)'),
+            ('metric_step_rmse_m', 'registration steps in metres against the truth: RMS error (m)'),
+            ('true_heading_error_end_rad', 'heading error of the IMU at the end, true (rad)'),
+            ('estimated_heading_error_end_rad', 'heading error at the end, estimated by the filter (rad)'),
+            ('estimated_heading_error_end_sigma_rad', '1-sigma of that estimate (rad)'),
+            ('usbl_fixes', 'USBL fixes'),
+            ('usbl_outliers', 'USBL outliers (> 4 sigma)'),
+            ('gated_fixes', 'fixes rejected by the gate (final)'),
+            ('gated_fixes_at_arrival', 'fixes rejected by the gate on arrival'),
+            ('recoveries', 'filter recoveries after consecutive rejections'),
+            ('filter_events', 'filter events processed'),
+            ('filter_updates_per_s', 'filter events per second of CPU'),
+            ('filter_rewinds', 're-processings for late fixes'),
+            ('frames', 'images'),
+            ('path_length_m', 'camera path length (m)'),
+            ('mean_gsd_m', 'mean ground sample distance (m)'),
+            ('registration_failures', 'image pairs whose registration failed'),
+            ('registration_pairs_per_s', 'registration speed in the benchmark (pairs/s)'),
+            ('cross_pass_constraint_error_median_m', 'cross-pass constraints: median error (m)'),
+            ('cross_pass_constraints', 'cross-pass constraints used'),
+            ('cross_pass_seconds', 'cross-pass adjustment wall time (s)'),
+            ('rts_seconds', 'RTS smoother wall time (s)'),
+            ('bench_seconds', 'benchmark wall time (s)'),
+        ],
+    },
+    'selfcal.json': {
+        'title': 'Camera self-calibration',
+        'command': 'devel/lib/exocet_mosaic/bench_selfcal --output-dir out/bench [--runs N]',
+        'measures': 'Accuracy of the intrinsics (focal lengths alpha_u, alpha_v in pixels, principal point u0, v0) '
+                    'estimated without a pattern by `self_calibrate` (Mendonca-Cipolla cost over fundamental '
+                    'matrices; Triggs\' planar method on a flat seabed), and of the project\'s fundamental-matrix '
+                    'estimator against OpenCV\'s.',
+        'data': 'Synthetic sequences reproducing the 2D3 report\'s Table 1 experiment: 8 key frames over a seabed '
+                'with +-0.5 m relief seen from 3 m, rotation of 40 degrees about the optical axis plus 8 degrees of '
+                'roll and pitch, 0.5 px image noise (`--runs`, default 50, seeds 1000 onwards). For the fundamental '
+                'matrix, 10 such sequences with 10 % of the observations wrong (about 19 % of the matches). For the '
+                'planar method, 20 flat sequences. End to end: a dive rendered by the simulator over relief, and '
+                'the same dive over a flat seabed.',
+        'method': [
+            'Errors are |estimate - truth| / truth in % for each intrinsic; mean over the runs, and the largest. '
+            '`sigma_*_mean_pct` is the mean 1-sigma the calibration reports; `monte_carlo_within_1_sigma_pct` the '
+            'share of errors within it.',
+            'Fundamental matrix: the project\'s normalised 8-point inside MSAC against `cv::findFundamentalMat` '
+            '(FM_RANSAC), same 1 px threshold: RMS Sampson distance of the exact (noise-free) matches and of the '
+            'noisy inliers, distance to the true F, and time per pair.',
+            'A flat seabed must be refused by the default calibration (GRIC prefers a homography): '
+            '`flat_refused_fraction`, `e2e_flat_refused`.',
+        ],
+        'targets': ['Mean errors below the 2D3 report\'s Table 1 (`report_err_*_pct`).'],
+        'references': ['2D3 report, Table 1 (mean |error| %): alpha_u 2.06, alpha_v 2.06, u0 1.65, v0 1.19.'],
+        'figures': [
+            ('err_*_max_pct', 'largest |error| over the runs (%)'),
+            ('err_*_pct', 'mean |error| over the runs (%)'),
+            ('sigma_*_mean_pct', 'mean reported 1-sigma (%)'),
+            ('report_err_*_pct', 'the 2D3 report\'s Table 1 (%)'),
+            ('monte_carlo_runs', 'Monte Carlo runs'),
+            ('monte_carlo_failures', 'runs where the calibration failed'),
+            ('monte_carlo_within_1_sigma_pct', 'errors within the reported 1-sigma (%)'),
+            ('monte_carlo_s_per_run', 'time per calibration (s)'),
+            ('f_ours_sampson_exact_px', 'ours: RMS Sampson distance of the exact matches (px)'),
+            ('f_opencv_sampson_exact_px', 'OpenCV: RMS Sampson distance of the exact matches (px)'),
+            ('f_ours_sampson_noisy_px', 'ours: RMS Sampson distance of the noisy inliers (px)'),
+            ('f_opencv_sampson_noisy_px', 'OpenCV: RMS Sampson distance of the noisy inliers (px)'),
+            ('f_ours_distance_to_true', 'ours: distance to the true F'),
+            ('f_opencv_distance_to_true', 'OpenCV: distance to the true F'),
+            ('f_ours_ms', 'ours: time per pair (ms)'),
+            ('f_opencv_ms', 'OpenCV: time per pair (ms)'),
+            ('planar_err_*_pct', 'planar (Triggs) on flat sequences: mean |error| (%)'),
+            ('flat_refused_fraction', 'flat sequences refused by the default calibration'),
+            ('e2e_flat_refused', 'rendered flat dive refused by the default calibration (1 = yes)'),
+            ('e2e_flat_planar_err_*_pct', 'rendered flat dive, planar method: |error| (%)'),
+            ('e2e_err_*_pct', 'rendered dive over relief: |error| (%)'),
+        ],
+    },
+    'tiles.json': {
+        'title': 'Live mosaicking chain and GeoTIFF tiles',
+        'command': 'devel/lib/exocet_mosaic/bench_tiles --output-dir out/bench [--dives pal,hd] [--pal-rate R] '
+                   '[--hd-rate R] [--attempts N]',
+        'measures': 'Throughput, latency and memory of the live chain (registration_node -> fusion_node -> '
+                    'tile_writer_node, as `launch/replay.launch` runs it) on a replayed dive, and the geometric '
+                    'quality of the GeoTIFF tiles it writes, before and after `adjust_tiles`.',
+        'data': 'Two simulated dives with surveyed checker targets (0.3 m), JPEG images, USBL 0.5 m at 1 Hz '
+                'arriving 1.5 s late. PAL: `config/dives/bench_tiles_pal.yaml`, about 67 s at 25 frames/s, a '
+                '3-line lawnmower (8 m lines 1.6 m apart, so that tiles of one line overlap tiles of the next), 2.5 m '
+                'altitude, ten targets; presets `pal_survey`. HD: `config/dives/bench_tiles_hd.yaml`, about 33 s of '
+                '1920x1080 at 25 frames/s, a 3 m line out and back, six targets; presets `hd_survey`.',
+        'method': [
+            'The dive is replayed with `rosbag play` at the goal\'s rate (8x real time for PAL, 2x for HD) on a '
+            'private ROS master; after frames are dropped the rate is halved and the replay tried again (at most '
+            '`--attempts` times). Throughput: frames over the time from the first to the last motion and pose '
+            'through registration and fusion; the fusion\'s end-of-input flush (it holds the last 0.3 s of the bag '
+            'until its inputs have been silent for 0.5 s) is left out and reported as `chain_end_of_input_flush_s`. '
+            'A frame is dropped when its motion, its fused pose or its arrival at the tile writer is missing. Lag: '
+            'arrival time minus where the replay clock puts the image. Memory: peak resident set (VmHWM) of each '
+            'node.',
+            'Landmarks: each surveyed target inside a tile is found by template matching and a sub-pixel saddle '
+            'search, and compared with its surveyed UTM position (m). The bound is max(2 GSD, the fused position '
+            '1-sigma).',
+            'Tile misalignment: the shift between two overlapping tiles on their common grid, by masked, windowed '
+            'phase correlation of patches (px). Consecutive tiles share images; other overlapping pairs are return '
+            'passes, whose misalignment is the live navigation\'s error between passes. `adjusted_*`: the same '
+            'measurements on the output of `adjust_tiles`.',
+        ],
+        'targets': [
+            'PAL replayed at 8x real time (200 frames/s) and HD at 2x (50 frames/s) with no frame dropped.',
+            'Landmark errors within the bound max(2 GSD, fused 1-sigma).',
+            'After `adjust_tiles`, overlapping tiles misaligned by at most 2 px.',
+        ],
+        'omit': ['dives.*.attempts', 'dives.*.landmark_observations', 'dives.*.pairs', 'dives.*.tile_list',
+                 'dives.*.tile_write_ms.*', 'dives.*.registration_lag_s', 'dives.*.fusion_lag_s',
+                 'dives.*.tiles_dir', 'dives.*.landmarks_ambiguous'],
+        'groups': {'dives': 'Per dive'},
+        'figures': [
+            ('chain_fps*without_drops', 'no frame dropped at that rate'),
+            ('chain_fps*', 'chain throughput (frames/s)'),
+            ('chain_rate*', 'replay rate (x real time)'),
+            ('rate', 'replay rate (x real time)'),
+            ('frames', 'frames in the bag'),
+            ('frames_dropped*', 'frames dropped'),
+            ('frames_before_first_pose', 'frames before the fusion\'s first pose'),
+            ('chain_end_of_input_flush_s', 'fusion end-of-input flush after the last frame (s)'),
+            ('registration_lag_max_s', 'largest lag of the registration behind the replay (s)'),
+            ('fusion_lag_max_s', 'largest lag of the fusion behind the replay (s)'),
+            ('tile_writer_done_after_s', 'tile writer had every image after (s)'),
+            ('landmark_error_median_m', 'landmark error, median (m)'),
+            ('landmark_error_p95_m', 'landmark error, p95 (m)'),
+            ('landmark_error_max_m', 'landmark error, max (m)'),
+            ('landmark_bound_m', 'bound max(2 GSD, fused 1-sigma) (m)'),
+            ('landmark_bound_tiles_m', 'bound max(2 GSD, tiles\' 1-sigma) (m)'),
+            ('landmarks_*', 'landmark counts'),
+            ('position_sigma_odometry_m', 'fused position 1-sigma, median (m)'),
+            ('position_sigma_tiles_m', 'tiles\' position 1-sigma (m)'),
+            ('tile_misalignment_px', 'consecutive tiles misaligned, max (px)'),
+            ('tile_misalignment_median_px', 'consecutive tiles misaligned, median (px)'),
+            ('tile_misalignment_pairs', 'consecutive tile pairs'),
+            ('tile_misalignment_patch_p95_px', 'consecutive tiles: worst patch p95 (px)'),
+            ('tile_misalignment_translation_max_px', 'consecutive tiles: translation part, max (px)'),
+            ('tile_misalignment_rotation_max_mrad', 'consecutive tiles: rotation part, max (mrad)'),
+            ('tile_misalignment_scale_max_permille', 'consecutive tiles: scale part, max (per mille)'),
+            ('tile_misalignment_spread_median_px', 'consecutive tiles: patch spread, median (px)'),
+            ('return_pass_misalignment_max_px', 'other overlapping pairs (return passes) misaligned, max (px)'),
+            ('return_pass_misalignment_median_px', 'other overlapping pairs misaligned, median (px)'),
+            ('return_pass_misalignment_max_m', 'other overlapping pairs misaligned, max (m)'),
+            ('return_pass_misalignment_patch_p95_px', 'other pairs: worst patch p95 (px)'),
+            ('return_pass_pairs', 'other overlapping pairs'),
+            ('adjusted_tile_misalignment_px', 'after adjust_tiles: consecutive tiles, max (px; target <= 2)'),
+            ('adjusted_tile_misalignment_median_px', 'after adjust_tiles: consecutive tiles, median (px)'),
+            ('adjusted_return_pass_misalignment_max_px', 'after adjust_tiles: other pairs, max (px; target <= 2)'),
+            ('adjusted_return_pass_misalignment_median_px', 'after adjust_tiles: other pairs, median (px)'),
+            ('adjusted_landmark_error_*_m', 'after adjust_tiles: landmark error (m)'),
+            ('peak_rss_mb*', 'peak resident memory (MB)'),
+            ('cpu_s_*', 'CPU time of the node (s)'),
+            ('chain_cpu_s', 'CPU time of the three nodes (s)'),
+            ('chain_cpu_cores', 'mean cores used by the chain'),
+            ('gsd_m', 'tile pixel size (m)'),
+            ('tiles', 'tiles written'),
+            ('tile_write_ms_*', 'time to write a tile (ms)'),
+            ('load_average_1min', 'machine load average during the run'),
+            ('cpu_count', 'cores of the machine'),
+            ('run_time_s', 'benchmark wall time (s)'),
+        ],
+    },
+    'servo.json': {
+        'title': 'Intrinsics-free visual servoing, point level',
+        'command': 'devel/lib/exocet_servo/bench_servo --output-dir out/bench',
+        'measures': 'Final pose error of the intrinsics-free servo (Malis) when the left camera, with other '
+                    'intrinsics, is servoed to where the right camera took the reference image; the same for '
+                    'ViSP\'s image-based servo on the raw points; the circular acquisition\'s agreement with its '
+                    'screw-motion prediction; the rate of one control-law step. `bench_servo_image` fills in the '
+                    'image-level figures (`image_loop_*`, `control_rate_hz`).',
+        'data': 'A simulated vent-like point object (100 points, 0.3 m, 1 m away), two pinhole cameras with '
+                'different intrinsics, start poses 50-100 mm and 5-9 degrees from the goal, 0.5 px image noise '
+                '(3 seeds per start) and noise-free runs; the rig transform of the 2D4 report (baseline 0.3 m, pan '
+                '18 degrees) for the circle of 20 servoings.',
+        'method': [
+            'Final error: position (mm) and rotation (deg) of the left camera against the right camera\'s pose at '
+            'the reference, mean and max over the runs. The pose bound is the Cramer-Rao bound of the pose from one '
+            'image with the same noise, with the intrinsics unknown (the servo\'s case) and known: the servo ends '
+            'where the noisy reference puts it, about 1.4 times that bound.',
+            'ViSP IBVS: `vpServo` with `vpFeaturePoint`s, fed the right camera\'s reference: it converges to the '
+            'pose where the left image looks like the right one, which is the wrong pose when the intrinsics '
+            'differ. ViSP\'s tutorial-ibvs-4pts (lambda 0.5) gives the iteration count of a classical servo.',
+            'Circle: 20 servoings along the rig-induced circle; prediction error is the largest distance to the '
+            'screw-motion prediction, drift the distance between start and end.',
+            'Control-law rate: one step (invariant points, interaction matrix, pseudo-inverse) with 200 points, '
+            '2000 repetitions.',
+        ],
+        'targets': [
+            'Point level with 0.5 px noise: 0.5 mm / 0.05 deg. The geometry does not allow it: with unknown '
+            'intrinsics the depth of a 0.3 m object at 1 m is confounded with the focal length, and the floor '
+            'shrinks as 1 / sqrt(points) (`final_pos_err_mm_rms_by_points`). The image-level loop meets its goal '
+            'because its points are sub-pixel registered.',
+            'Image level: 2 mm / 0.2 deg; control step at least 30 Hz; circle prediction within 1 mm.',
+        ],
+        'figures': [
+            ('final_pos_err_mm', 'invariant servo, 0.5 px noise: position error, mean (mm)'),
+            ('final_rot_err_deg', 'invariant servo, 0.5 px noise: rotation error, mean (deg)'),
+            ('final_pos_err_mm_max', 'invariant servo, 0.5 px noise: position error, max (mm)'),
+            ('final_rot_err_deg_max', 'invariant servo, 0.5 px noise: rotation error, max (deg)'),
+            ('iterations', 'invariant servo, 0.5 px noise: iterations, mean'),
+            ('final_pos_err_mm_noise_free', 'invariant servo, no noise: position error, max (mm)'),
+            ('final_rot_err_deg_noise_free', 'invariant servo, no noise: rotation error, max (deg)'),
+            ('iterations_noise_free', 'invariant servo, no noise: iterations, mean'),
+            ('final_pos_err_mm_rms_by_points.*', 'position error RMS with this many points (mm)'),
+            ('pose_bound_intrinsics_unknown_mm', 'one-image pose bound, intrinsics unknown (mm)'),
+            ('pose_bound_intrinsics_unknown_deg', 'one-image pose bound, intrinsics unknown (deg)'),
+            ('pose_bound_intrinsics_known_mm', 'one-image pose bound, intrinsics known (mm)'),
+            ('pose_bound_intrinsics_known_deg', 'one-image pose bound, intrinsics known (deg)'),
+            ('ibvs_final_pos_err_mm', 'ViSP IBVS (current interaction): position error, mean (mm)'),
+            ('ibvs_final_rot_err_deg', 'ViSP IBVS (current interaction): rotation error, mean (deg)'),
+            ('ibvs_desired_final_pos_err_mm', 'ViSP IBVS (desired interaction): position error, mean (mm)'),
+            ('ibvs_desired_final_rot_err_deg', 'ViSP IBVS (desired interaction): rotation error, mean (deg)'),
+            ('visp_tutorial_iterations', 'ViSP 4-point tutorial: iterations to |e|^2 < 1e-4'),
+            ('trajectory_prediction_err_mm', 'circle, 0.5 px: largest distance to the prediction (mm)'),
+            ('trajectory_prediction_err_mm_noise_free', 'circle, no noise: largest distance to the prediction (mm)'),
+            ('trajectory_prediction_err_mm_1000_points', 'circle, 1000 points: largest distance to the prediction (mm)'),
+            ('circle_drift_mm', 'circle, 0.5 px: drift after 20 servoings (mm)'),
+            ('circle_drift_mm_noise_free', 'circle, no noise: drift after 20 servoings (mm)'),
+            ('circle_drift_mm_1000_points', 'circle, 1000 points: drift after 20 servoings (mm)'),
+            ('control_law_rate_hz', 'one control-law step, 200 points (Hz)'),
+            ('control_law_points', 'points of that step'),
+            ('image_loop_pos_err_mm', 'image level (from servo_image.json): position error, mean (mm)'),
+            ('image_loop_rot_err_deg', 'image level (from servo_image.json): rotation error, mean (deg)'),
+            ('control_rate_hz', 'image level (from servo_image.json): control rate, one core (Hz)'),
+        ],
+    },
+    'servo_image.json': {
+        'title': 'Intrinsics-free visual servoing, image level',
+        'command': 'devel/lib/exocet_servo/bench_servo_image --output-dir out/bench',
+        'measures': 'The servo on rendered images, as servo_node runs it (SIFT matching, KLT tracking, invariant '
+                    'law): final pose error, control rate on one core, and the 2D4 report\'s circular acquisition, '
+                    'through the simulated arm and free-flying.',
+        'data': 'exocet_servo\'s ray-cast textured vent (0.3 m high) on a seabed, rendered at 640x480 for two '
+                'cameras with different intrinsics (left 800 px, right 720 px focal length). Four starts 50-100 mm '
+                'and 5-9 degrees from the goal. The rig transform: baseline 0.3 m, pan 18 degrees. The simulated '
+                '6-DOF arm (reach 1.22 m) with its joint limits.',
+        'method': [
+            'Image loop: the right camera takes the reference image; the left camera is servoed until convergence; '
+            'final error against the right camera\'s pose. `*_without_anchoring`: the same without re-anchoring the '
+            'points on the reference image near the goal.',
+            'Control rate: tracking, invariant features and law per image, CPU time on one core '
+            '(`cv::setNumThreads(1)`); `control_rate_hz_wall` by the wall clock.',
+            'Circle through the arm: the feasibility check (inverse kinematics along the poses and the screw paths '
+            'between them: reach, joint margins, conditioning) from the default start (`arm_circle_default_*`), a '
+            'search for where the vent should stand for the longest feasible circle (`arm_circle_placement_m`, '
+            '`arm_circle_start_azimuth_deg`), then the run there. Drift: distance to the predicted circle.',
+            'Free-flying circle: 20 servoings (a full circle about the vent\'s axis, radius 0.959 m), each from '
+            'where the last ended to where the right camera took its reference; a renderer check first confirms '
+            'the chimney is seen textured from every side.',
+        ],
+        'targets': ['Image level: 2 mm / 0.2 deg from the goal; control rate at least 30 Hz on one core; each '
+                    'servoing of the circle within 1 mm of the prediction.'],
+        'figures': [
+            ('image_loop_pos_err_mm', 'position error, mean of the starts (mm)'),
+            ('image_loop_rot_err_deg', 'rotation error, mean of the starts (deg)'),
+            ('image_loop_pos_err_mm_max', 'position error, max (mm)'),
+            ('image_loop_rot_err_deg_max', 'rotation error, max (deg)'),
+            ('image_loop_iterations', 'images per servoing, mean'),
+            ('image_loop_converged', 'starts that converged'),
+            ('image_loop_runs', 'starts'),
+            ('image_loop_*_without_anchoring', 'the same without re-anchoring'),
+            ('image_loop_converged_without_anchoring', 'starts that converged without re-anchoring'),
+            ('control_rate_hz', 'control rate, CPU time on one core (Hz)'),
+            ('control_rate_hz_wall', 'control rate, wall clock (Hz)'),
+            ('control_cpu_ms_*', 'CPU time per image (ms)'),
+            ('control_wall_ms_*', 'wall time per image (ms)'),
+            ('control_points_mean', 'points tracked, mean'),
+            ('sift_match_ms_mean', 'SIFT matching, mean (ms)'),
+            ('load_average', 'machine load average'),
+            ('arm_circle_default_feasible_servoings', 'arm, default start: servoings the check finds feasible'),
+            ('arm_circle_default_min_sigma', 'arm, default start: smallest Jacobian singular value predicted'),
+            ('arm_circle_default_servoings', 'arm, default start: servoings completed'),
+            ('arm_circle_default_status', 'arm, default start: how the run ended'),
+            ('arm_circle_default_min_sigma_run', 'arm, default start: smallest singular value in the run'),
+            ('arm_circle_default_drift_end_mm', 'arm, default start: drift at the end (mm)'),
+            ('arm_circle_placement_m', 'arm: vent placement found [x, y, z] in the arm base (m)'),
+            ('arm_circle_start_azimuth_deg', 'arm: start azimuth of that placement (deg)'),
+            ('arm_circle_min_sigma', 'arm: smallest singular value predicted there'),
+            ('arm_circle_min_joint_margin_rad', 'arm: smallest joint margin predicted there (rad)'),
+            ('arm_circle_feasible_servoings', 'arm: servoings feasible there'),
+            ('arm_circle_max_feasible_servoings_any_placement', 'arm: most servoings feasible at any placement'),
+            ('arm_circle_search_s', 'arm: placement search time (s)'),
+            ('arm_circle_servoings', 'arm: servoings completed there'),
+            ('arm_circle_status', 'arm: how the run ended'),
+            ('arm_circle_images', 'arm: images'),
+            ('arm_circle_drift_end_*', 'arm: drift from the predicted circle at the end'),
+            ('arm_circle_quarter_drift_*', 'arm: drift after a quarter circle'),
+            ('arm_circle_min_sigma_run', 'arm: smallest singular value in the run'),
+            ('circle_servoings', 'free-flying circle: servoings completed'),
+            ('circle_drift_end_mm', 'free-flying circle: drift after the last servoing (mm)'),
+            ('circle_drift_end_deg', 'free-flying circle: rotation drift after the last servoing (deg)'),
+            ('circle_drift_max_mm', 'free-flying circle: largest drift (mm)'),
+            ('circle_closure_*', 'free-flying circle: distance to the start after the full circle'),
+            ('circle_images', 'free-flying circle: images'),
+            ('circle_status', 'free-flying circle: how it ended'),
+            ('circle_seconds', 'free-flying circle: wall time (s)'),
+            ('circle_renderer_min_chimney_fraction', 'smallest fraction of a view the chimney fills'),
+            ('circle_renderer_min_chimney_gradient', 'smallest mean gradient on the chimney (texture check)'),
+            ('servoing', 'servoing number'),
+            ('drift_mm', 'distance to the predicted circle (mm)'),
+            ('drift_deg', 'rotation from the predicted circle (deg)'),
+            ('final_pos_err_mm', 'position error at the end (mm)'),
+            ('final_rot_err_deg', 'rotation error at the end (deg)'),
+            ('initial_pos_mm', 'start position error (mm)'),
+            ('initial_rot_deg', 'start rotation error (deg)'),
+            ('images', 'images'),
+            ('iterations', 'images'),
+            ('rematches', 'SIFT re-matchings'),
+            ('initial_matches', 'SIFT pairs at the start'),
+            ('status', 'how it ended'),
+        ],
+        'groups': {'circle_per_servoing': 'Free-flying circle, per servoing', 'starts': 'Image loop, per start'},
+    },
+    'stereo.json': {
+        'title': 'Dense stereo (Middlebury)',
+        'command': 'devel/lib/exocet_stereo/bench_stereo --output-dir out/bench [--methods ssd,dp,...] '
+                   '[--scenes tsukuba,...] [--threads N] [--pm-seed N] [--pm-seeds 1,2,...]',
+        'measures': 'Quality and speed of each dense stereo method of `exocet_stereo` on the Middlebury v2 scenes, '
+                    'and how PatchMatch\'s result depends on its random seed.',
+        'data': 'Middlebury v2 stereo pairs tsukuba, venus, teddy and cones (`../shared/data/middlebury_stereo`), '
+                'with their ground-truth disparities and masks.',
+        'method': [
+            'Bad pixels: percentage of the mask\'s pixels whose disparity differs from the ground truth by more '
+            'than 1 px, on the non-occluded (nonocc), all and near-discontinuity (disc) masks, as the Middlebury v2 '
+            'evaluation. Integer disparities except PatchMatch where the ground truth is fractional (its Tsukuba '
+            'map is rounded, as the published one). One parameter set for all scenes, chosen on these same four '
+            'scenes (there is no other ground truth here).',
+            'Methods: shiftable-window SSD (ssd), dynamic programming with occlusions (dp), scanline optimisation '
+            '(so) and its 8-direction variant (sgm), alpha-expansion graph cuts (gc), Bayesian diffusion (bd), '
+            'OpenCV\'s StereoSGBM (sgbm, the baseline) and the project\'s PatchMatch Stereo (pm, Bleyer et al. '
+            '2011, with a left-right tolerance of 0.75 px, a final 5x5 median and gradient differences truncated '
+            'at 4 grey levels).',
+            'Time (ms): best of 3 runs for the fast methods, one run above a second, one thread (`--threads 1`).',
+            'PatchMatch draws random planes; one published run is one draw. The seed study (`pm_seeds`) runs pm '
+            'from each of `--pm-seeds` (default 1-5; untimed, every core, the result does not depend on the thread '
+            'count) and gives the mean and the worst.',
+        ],
+        'targets': [
+            'Graph cuts at most 2 % bad pixels (nonocc) on Tsukuba.',
+            'The fastest method at least 20 frames/s on Tsukuba (at most 50 ms).',
+            'The best method at or below the published PatchMatch Stereo rates on each scene.',
+        ],
+        'references': ['PatchMatch Stereo, published non-occluded bad pixels (%): tsukuba 2.09, venus 0.21, teddy '
+                       '2.99, cones 2.47 (`../shared/data/middlebury_stereo/reference_patchmatch_badpixels.csv`).'],
+        'figures': [
+            ('nonocc', 'non-occluded bad pixels (%)'),
+            ('all', 'bad pixels, all (%)'),
+            ('disc', 'bad pixels near discontinuities (%)'),
+            ('ms', 'time, one thread (ms)'),
+            ('seeds', 'seeds'),
+            ('nonocc_mean', 'mean over the seeds (%)'),
+            ('nonocc_max', 'worst seed (%)'),
+        ],
+        'groups': {'pm_seeds': 'PatchMatch seed study: non-occluded bad pixels (%) per seed'},
+    },
+    'reconstruction.json': {
+        'title': '3D reconstruction',
+        'command': 'devel/lib/exocet_stereo/bench_reconstruction --output-dir out/bench --shared-data '
+                   '$PWD/../shared/data [--only all|vent]',
+        'measures': 'Stereo rig calibration against OpenCV\'s stored result; sparse multi-view reconstruction from '
+                    'perturbed poses beside COLMAP; dense reconstruction of a rendered vent scored against its exact '
+                    'geometry.',
+        'data': 'Calibration: 13 real chessboard pairs 640x480 (`../shared/data/stereo_chessboard`, 9x6 inner '
+                'corners, 25 mm squares assumed). Sparse: Middlebury templeSparseRing, 16 real 640x480 views with '
+                'exact K R t (`../shared/data/temple_sparse_ring`), starting from poses perturbed by 5 % of the '
+                'camera-to-object distance and 3 degrees. Vent: exocet_servo\'s rendered vent (0.3 m high) seen by '
+                'ten stereo pairs on a ring 0.6 m around it, baseline 0.15 m, two different known intrinsics, no '
+                'image noise.',
+        'method': [
+            'Calibration: OpenCV `calibrateCamera` + `stereoCalibrate`; RMS reprojection errors and focal lengths, '
+            'and their differences to OpenCV\'s stored `intrinsics.yml`.',
+            'Sparse: pairs by nearest centres, SIFT matching with an epipolar check from the initial poses, tracks, '
+            'triangulation, Ceres bundle adjustment, outlier removal, bundle adjustment. Centre error: after the '
+            'best similarity alignment to the true poses, as % of each camera\'s distance to the object; max and '
+            'RMS. COLMAP (CPU SIFT, exhaustive matching, incremental mapper with the exact intrinsics held) on '
+            'the same 16 images, without a pose prior.',
+            'Vent: rectification and dense SGM per pair over the depths of a crop box, depth maps fused into one '
+            'cloud (multi-view consistency, 1.5 mm voxels), surface by moving least squares on a 2 mm grid; RMS '
+            'distance to the true surface over the chimney and top (points below 5 mm above the seabed left out), '
+            'in mm and in % of the vent\'s height; completeness: share of points sampled every 2 mm on the true '
+            'chimney with a surface vertex within 3 mm. Optimistic in two ways: no sensor noise, exact rig and '
+            'poses.',
+        ],
+        'targets': ['Vent surface within 0.5 % of the vent\'s height (RMS).'],
+        'figures': [
+            ('calib_pairs_used', 'chessboard pairs used'),
+            ('calib_rms_left_px', 'left camera RMS reprojection error (px)'),
+            ('calib_rms_right_px', 'right camera RMS reprojection error (px)'),
+            ('calib_rms_stereo_px', 'stereo RMS reprojection error (px)'),
+            ('calib_fx_left_px', 'left focal length (px)'),
+            ('calib_fx_right_px', 'right focal length (px)'),
+            ('calib_*_minus_opencv_px', 'difference to OpenCV\'s stored value (px)'),
+            ('calib_baseline_mm', 'baseline (mm, with 25 mm squares)'),
+            ('calib_optical_axes_deg', 'angle between the optical axes (deg)'),
+            ('calib_time_s', 'calibration time (s)'),
+            ('temple_views_registered', 'ours: views registered (of 16)'),
+            ('temple_points', 'ours: 3D points'),
+            ('temple_observations', 'ours: observations'),
+            ('temple_reproj_rms_px', 'ours: reprojection RMS (px)'),
+            ('temple_center_err_pct', 'ours: camera centre error after alignment, max (%)'),
+            ('temple_center_err_rms_pct', 'ours: camera centre error after alignment, RMS (%)'),
+            ('temple_initial_center_err_pct', 'perturbed start: camera centre error, max (%)'),
+            ('temple_initial_reproj_rms_px', 'perturbed start: reprojection RMS (px)'),
+            ('temple_time_s', 'ours: wall time (s)'),
+            ('colmap_status', 'COLMAP: how it ran'),
+            ('colmap_usable', 'COLMAP: result usable (1 = yes)'),
+            ('colmap_time_s', 'COLMAP: wall time (s)'),
+            ('colmap_time_ratio', 'our wall time / COLMAP\'s'),
+            ('colmap_views_registered', 'COLMAP: views registered (of 16)'),
+            ('colmap_points', 'COLMAP: 3D points'),
+            ('colmap_reproj_px', 'COLMAP: reprojection RMS (px)'),
+            ('colmap_center_err_pct', 'COLMAP: camera centre error after alignment, max (%)'),
+            ('colmap_center_err_rms_pct', 'COLMAP: camera centre error after alignment, RMS (%)'),
+            ('vent_pairs', 'vent: stereo pairs'),
+            ('vent_points', 'vent: fused cloud points on the chimney'),
+            ('vent_rms_pct', 'vent: surface RMS distance (% of the height; target <= 0.5)'),
+            ('vent_cloud_rms_pct', 'vent: fused cloud RMS distance (% of the height)'),
+            ('vent_surface_rms_mm', 'vent: surface RMS distance (mm)'),
+            ('vent_cloud_rms_mm', 'vent: fused cloud RMS distance (mm)'),
+            ('vent_box_rms_pct', 'vent: surface RMS distance, whole crop box (%)'),
+            ('vent_cloud_box_rms_pct', 'vent: cloud RMS distance, whole crop box (%)'),
+            ('vent_box_points', 'vent: cloud points in the crop box'),
+            ('vent_completeness_pct', 'vent: completeness (%)'),
+            ('vent_surface_vertices', 'vent: surface vertices'),
+            ('vent_surface_triangles', 'vent: surface triangles'),
+            ('vent_object_size_m', 'vent: height (m)'),
+            ('vent_baseline_m', 'vent: rig baseline (m)'),
+            ('vent_method', 'vent: dense stereo method'),
+            ('vent_*seconds', 'vent: time (s)'),
+        ],
+    },
+}
+
+MAX_INLINE_ITEMS = 12  # longer lists of numbers are summarised (the JSON file has them all)
+MAX_RECORD_ROWS = 40   # longer lists of records are summarised
+
+
+class BadArgument(Exception):
+    pass
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Values.
+
+def is_scalar(v):
+    return v is None or isinstance(v, (bool, int, float, str))
+
+
+def fmt(v):
+    """A value as table text: integers as they are, other numbers with 4 significant digits."""
+    if v is None:
+        return 'n/a'
+    if isinstance(v, bool):
+        return 'yes' if v else 'no'
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return 'n/a'
+        if v.is_integer() and abs(v) < 1e12:
+            return str(int(v))
+        if abs(v) >= 1000:
+            return '%.0f' % v
+        return '%.4g' % v
+    if isinstance(v, str):
+        return cell(v)
+    if isinstance(v, list):
+        if all(is_scalar(x) for x in v):
+            if len(v) > MAX_INLINE_ITEMS:
+                return '[%s, ...] (%d values)' % (', '.join(fmt(x) for x in v[:6]), len(v))
+            return '[' + ', '.join(fmt(x) for x in v) + ']'
+        return '(%d records)' % len(v)
+    if isinstance(v, dict):
+        return '(%d entries)' % len(v)
+    return cell(str(v))
+
+
+def cell(text):
+    return str(text).replace('|', '\\|').replace('\n', ' ')
+
+
+def flatten(value, prefix, omit, out):
+    """(dotted key, value) pairs: nested objects flattened; lists kept whole (fmt summarises them)."""
+    if isinstance(value, dict):
+        for k in value:
+            key = '%s.%s' % (prefix, k) if prefix else str(k)
+            if any(fnmatch.fnmatchcase(key, p) for p in omit):
+                continue
+            flatten(value[k], key, omit, out)
+    else:
+        out.append((prefix, value))
+    return out
+
+
+def meaning(key, figures):
+    for pattern, text in figures:
+        if fnmatch.fnmatchcase(key, pattern):
+            return text
+    return ''
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Tables.
+
+def table(header, rows):
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(r) + ' |' for r in rows]
+    return lines
+
+
+def is_record_group(value):
+    """A dict of two or more dicts (one record each, e.g. per dive or per scene)."""
+    return (isinstance(value, dict) and len(value) >= 2 and
+            all(isinstance(v, dict) for v in value.values()))
+
+
+def strip_omit(omit, key, member):
+    """The omit patterns that apply inside `key`.`member`, relative to it."""
+    out = []
+    for p in omit:
+        for head in ('%s.*.' % key, '%s.%s.' % (key, member)):
+            if p.startswith(head):
+                out.append(p[len(head):])
+    return out
+
+
+def records_of_group(value, omit, key):
+    return {m: flatten(v, '', strip_omit(omit, key, m), []) for m, v in value.items()}
+
+
+def render_group(key, value, desc, omit):
+    """A dict of records: rows = members and columns = leaf keys, or transposed when there are few members and
+    many leaf keys (e.g. the PAL and HD dives side by side)."""
+    records = records_of_group(value, omit, key)
+    members = list(records)
+    leaves = []
+    for m in members:
+        for k, _ in records[m]:
+            if k not in leaves:
+                leaves.append(k)
+    values = {m: dict(records[m]) for m in members}
+    caption = desc.get('groups', {}).get(key, key)
+    figures = desc.get('figures', [])
+    lines = ['#### %s (`%s`)' % (caption, key), '']
+    if len(members) <= 6 and len(leaves) > len(members):
+        rows = [['`%s`' % leaf] + [fmt(values[m].get(leaf)) if leaf in values[m] else '' for m in members] +
+                [cell(meaning(leaf, figures))] for leaf in leaves]
+        lines += table(['figure'] + [cell(m) for m in members] + ['meaning'], rows)
+    else:
+        rows = [[cell(m)] + [fmt(values[m].get(leaf)) if leaf in values[m] else '' for leaf in leaves]
+                for m in members]
+        lines += table([cell(key)] + ['%s' % cell(leaf) for leaf in leaves], rows)
+        explained = [(leaf, meaning(leaf, figures)) for leaf in leaves if meaning(leaf, figures)]
+        if explained:
+            lines += ['', '; '.join('%s: %s' % (cell(leaf), cell(text)) for leaf, text in explained) + '.']
+    return lines + ['']
+
+
+def render_records(key, items, desc):
+    """A list of records (one row each)."""
+    caption = desc.get('groups', {}).get(key, key)
+    lines = ['#### %s (`%s`)' % (caption, key), '']
+    if len(items) > MAX_RECORD_ROWS:
+        return lines + ['%d records: see the JSON file.' % len(items), '']
+    flat = [dict(flatten(item, '', [], [])) if isinstance(item, dict) else {'value': item} for item in items]
+    columns = []
+    for f in flat:
+        for k in f:
+            if k not in columns:
+                columns.append(k)
+    lines += table([cell(c) for c in columns], [[fmt(f[c]) if c in f else '' for c in columns] for f in flat])
+    figures = desc.get('figures', [])
+    explained = [(c, meaning(c, figures)) for c in columns if meaning(c, figures)]
+    if explained:
+        lines += ['', '; '.join('%s: %s' % (cell(c), cell(text)) for c, text in explained) + '.']
+    return lines + ['']
+
+
+def matrix_families(groups, omit):
+    """Record groups with the same members and the same scalar leaves (e.g. one per stereo method, each holding
+    the same scenes): shown as one table per leaf, rows = groups, columns = members."""
+    shapes = {}
+    for key, value in groups.items():
+        records = records_of_group(value, omit, key)
+        if not all(all(is_scalar(v) for _, v in r) for r in records.values()):
+            continue
+        members = tuple(records)
+        leaves = []  # in the order of the file
+        for r in records.values():
+            leaves += [k for k, _ in r if k not in leaves]
+        if len(leaves) > 6:
+            continue
+        shape = (members, frozenset(leaves))
+        if shape not in shapes:
+            shapes[shape] = (tuple(leaves), [])
+        shapes[shape][1].append(key)
+    return {(members, leaves): keys for (members, _), (leaves, keys) in shapes.items() if len(keys) >= 2}
+
+
+def render_figures(data, desc):
+    """The tables of one JSON document."""
+    omit = desc.get('omit', [])
+    figures = desc.get('figures', [])
+    lines = []
+    scalars, groups, record_lists = [], {}, {}
+    for key, value in data.items():
+        if str(key).startswith('_') or any(fnmatch.fnmatchcase(key, p) for p in omit):
+            continue
+        if is_record_group(value):
+            groups[key] = value
+        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            record_lists[key] = value
+        else:
+            flatten(value, key, omit, scalars)
+    if scalars:
+        lines += table(['figure', 'value', 'meaning'],
+                       [['`%s`' % cell(k), fmt(v), cell(meaning(k, figures))] for k, v in scalars])
+        lines.append('')
+    in_family = set()
+    for (members, leaves), keys in matrix_families(groups, omit).items():
+        in_family.update(keys)
+        for leaf in leaves:
+            text = meaning(leaf, figures)
+            heading = cell(text[:1].upper() + text[1:]) if text else cell(leaf)
+            lines += ['#### %s (`%s`)' % (heading, leaf), '']
+            rows = []
+            for key in keys:
+                values = dict(flatten(groups[key], '', [], []))
+                rows.append(['`%s`' % cell(key)] + [fmt(values['%s.%s' % (m, leaf)]) if '%s.%s' % (m, leaf) in values
+                                                    else '' for m in members])
+            lines += table([''] + [cell(m) for m in members], rows)
+            lines.append('')
+    for key, value in groups.items():
+        if key not in in_family:
+            lines += render_group(key, value, desc, omit)
+    for key, items in record_lists.items():
+        lines += render_records(key, items, desc)
+    return lines
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The page.
+
+def measured_on(path, data):
+    stated = data.get('_measured_on') if isinstance(data, dict) else None
+    if isinstance(stated, str) and stated:
+        return stated
+    stamp = datetime.datetime.fromtimestamp(os.path.getmtime(path), datetime.timezone.utc)
+    return stamp.strftime('%Y-%m-%d %H:%M UTC') + ' (date of the file)'
+
+
+def section(name, path, desc):
+    """Lines of one benchmark's section, and the error if its file could not be read."""
+    title = desc.get('title', name[:-len('.json')].replace('_', ' ').capitalize()) if desc else \
+        name[:-len('.json')].replace('_', ' ').capitalize()
+    lines = ['## %s' % title, '', 'File: `%s`.' % name]
+    if desc:
+        if desc.get('command'):
+            lines[-1] += ' Run alone: `%s`.' % desc['command']
+        lines += ['', '**What it measures.** ' + desc['measures'], '', '**Data.** ' + desc['data'], '',
+                  '**Method.**', '']
+        lines += ['- ' + p for p in desc['method']]
+        lines += ['', '**Targets.**', '']
+        lines += ['- ' + t for t in desc['targets']]
+        for r in desc.get('references', []):
+            lines += ['', '**Reference.** ' + r]
+    lines.append('')
+    if not os.path.exists(path):
+        return lines + ['Not run: there is no `%s` (run `make bench`).' % name, ''], None
+    try:
+        with open(path) as f:
+            data = json.load(f)
+        if not isinstance(data, dict):
+            raise ValueError('the file holds a %s, not a JSON object' % type(data).__name__)
+    except (OSError, ValueError) as e:
+        return lines + ['Could not be read: %s.' % cell(e), ''], '%s: %s' % (path, e)
+    if not desc:
+        lines += ['No description of this benchmark yet (add one to BENCHMARKS in '
+                  '`tools/make-benchmarks-doc.py`); its figures as written:', '']
+    lines += ['### Figures', '', '*Measured on: %s.*' % cell(measured_on(path, data)), '']
+    note = data.get('_note')
+    if isinstance(note, str) and note:
+        lines += ['*Note: %s*' % cell(note), '']
+    return lines + render_figures(data, desc or {}), None
+
+
+def build(bench_dir):
+    files = sorted(os.path.basename(p) for p in glob.glob(os.path.join(bench_dir, '*.json')))
+    names = list(BENCHMARKS) + [f for f in files if f not in BENCHMARKS]
+    lines = [
+        '# Benchmarks',
+        '',
+        '<!-- Generated by tools/make-benchmarks-doc.py from %s/*.json: do not edit by hand. The descriptions are '
+        'in the script. -->' % bench_dir.rstrip('/'),
+        '',
+        '`make bench` runs every benchmark (`tools/run-bench.sh`: the executables `bench_*` of the workspace), each '
+        'writing `out/bench/<name>.json`, then writes this page from those files. Speeds and memory depend on the '
+        'machine and on what else runs on it: each section gives its date, and the method says whether a time is '
+        'wall-clock or CPU. Accuracy figures do not depend on the machine.',
+        '',
+    ]
+    lines += ['- [%s](#%s)' % (BENCHMARKS.get(n, {}).get('title', n), anchor(BENCHMARKS.get(n, {}).get('title', n)))
+              for n in names if n in BENCHMARKS or n in files]
+    lines.append('')
+    errors = []
+    for name in names:
+        body, error = section(name, os.path.join(bench_dir, name), BENCHMARKS.get(name))
+        lines += body
+        if error:
+            errors.append(error)
+    while lines and lines[-1] == '':
+        lines.pop()
+    return '\n'.join(lines) + '\n', errors
+
+
+def anchor(title):
+    """GitHub's heading anchor."""
+    text = ''.join(c for c in title.lower() if c.isalnum() or c in ' -_')
+    return text.replace(' ', '-')
+
+
+def write_atomically(path, text):
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix='.' + os.path.basename(path) + '.', suffix='.partial', dir=folder)
+    try:
+        with os.fdopen(fd, 'w') as f:
+            f.write(text)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def parse_arguments(argv):
+    parser = argparse.ArgumentParser(
+        prog='make-benchmarks-doc.py',
+        description='Writes the benchmarks page (Markdown) from the JSON files that make bench writes.')
+    parser.add_argument('--bench-dir', default='out/bench', help='folder of the *.json files (default out/bench)')
+    parser.add_argument('--output', default='docs/benchmarks.md', help='page to write (default docs/benchmarks.md)')
+    args = parser.parse_args(argv)  # exits 2 with a message on an unknown or incomplete option
+    if not os.path.isdir(args.bench_dir):
+        raise BadArgument('--bench-dir %s is not a folder (make bench writes out/bench)' % args.bench_dir)
+    if not args.output or os.path.isdir(args.output):
+        raise BadArgument('--output %r must name a file, not a folder' % args.output)
+    return args
+
+
+def main(argv):
+    try:
+        args = parse_arguments(argv)
+    except BadArgument as e:
+        print('make-benchmarks-doc: %s' % e, file=sys.stderr)
+        return 2
+    text, errors = build(args.bench_dir)
+    try:
+        write_atomically(args.output, text)
+    except OSError as e:
+        print('make-benchmarks-doc: cannot write %s: %s' % (args.output, e), file=sys.stderr)
+        return 1
+    for error in errors:
+        print('make-benchmarks-doc: could not read %s' % error, file=sys.stderr)
+    print('make-benchmarks-doc: wrote %s' % args.output)
+    return 1 if errors else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
