@@ -143,11 +143,13 @@ struct Speed {
   double detections_per_frame = 0.0, features_per_frame = 0.0;
 };
 
-/// Rate of registerNext over `frames` (the previous motion as prediction, as registration_node does), the clip
-/// repeated until at least `min_seconds` of wall time have passed.
-Speed speed(RegistrationMethod method, MotionModel model, const std::vector<cv::Mat>& frames, double min_seconds) {
-  std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(method, model));
-  FrameRegistrar* inner = r.get();
+/// Rate of the registration front-end registration_node runs (SequenceRegistrar: prediction, restart policy,
+/// fallback) over `frames` taken at `stamps_s`, the clip repeated until at least `min_seconds` of wall time have
+/// passed.
+Speed speed(RegistrationMethod method, MotionModel model, const std::vector<cv::Mat>& frames,
+            const std::vector<double>& stamps_s, double min_seconds) {
+  SequenceRegistrar sequence(makeRegistrar(configFor(method, model)), SequenceRegistrarConfig());
+  FrameRegistrar* inner = &sequence.registrar();
   if (auto* normalizing = dynamic_cast<NormalizingRegistrar*>(r.get())) inner = &normalizing->inner();
   const auto* klt = dynamic_cast<const KltRegistrar*>(inner);
   Speed s;
@@ -156,12 +158,11 @@ Speed speed(RegistrationMethod method, MotionModel model, const std::vector<cv::
   int detections = 0, features = 0;
   const auto start = Clock::now();
   const double cpu_start = threadCpuSeconds();
-  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
   do {
-    r->reset();
-    for (const cv::Mat& f : frames) {
-      const MotionEstimate e = r->registerNext(f, prediction);
-      prediction = e.failed ? Eigen::Matrix3d::Identity() : e.pixel_matrix;
+    sequence.restart();
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const SequenceStep step = sequence.add(frames[i], stamps_s[i]);
+      const MotionEstimate& e = step.motion;
       ++s.frames;
       if (klt) {
         const KltDiagnostics& d = klt->lastDiagnostics();
@@ -361,9 +362,9 @@ int main(int argc, char** argv) {
   if (accuracy) {
     for (const Candidate& c : candidates) {
       if (!wanted(c.key)) continue;
-      std::unique_ptr<FrameRegistrar> r = makeRegistrar(configFor(c.method, c.model));
+      SequenceRegistrar r(makeRegistrar(configFor(c.method, c.model)), SequenceRegistrarConfig());
       t0 = Clock::now();
-      const SequenceScore& s = scores[c.key] = evaluateSequence(*r, pal.gray, truth);
+      const SequenceScore& s = scores[c.key] = evaluateSequence(r, pal.gray, pal.stamps_s, truth);
       const double run_s = msSince(t0) / 1000.0;
       // The segments are scored on the same run: the registrar's state is that of the whole dive.
       const SequenceScore s_dark = subset(s, [&](int i) { return pal.light_gain[i] < 1.0; });
@@ -414,7 +415,9 @@ int main(int argc, char** argv) {
       sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml", {"camera.preset=hd", "duration_s=11.99"});
   if (timing) {
     // 300 frames (12 s) of the dive: long enough that tracking, not the first detection, sets the rate.
-    const std::vector<cv::Mat> pal_clip(pal.gray.begin(), pal.gray.begin() + std::min<size_t>(300, pal.gray.size()));
+    const size_t clip_frames = std::min<size_t>(300, pal.gray.size());
+    const std::vector<cv::Mat> pal_clip(pal.gray.begin(), pal.gray.begin() + clip_frames);
+    const std::vector<double> pal_clip_stamps_s(pal.stamps_s.begin(), pal.stamps_s.begin() + clip_frames);
     struct Timed {
       std::string key;
       RegistrationMethod method;
@@ -430,7 +433,7 @@ int main(int argc, char** argv) {
     };
     for (const Timed& t : timed) {
       if (!wanted(t.key.substr(0, t.key.find('_')))) continue;
-      fps[t.key] = speed(t.method, t.model, pal_clip, t.seconds);
+      fps[t.key] = speed(t.method, t.model, pal_clip, pal_clip_stamps_s, t.seconds);
       json.set(t.key + "_fps_pal", fps[t.key].wall_fps);
       json.set(t.key + "_fps_pal_cpu", fps[t.key].cpu_fps);
       printSpeed(t.key + " PAL", fps[t.key]);
@@ -441,7 +444,7 @@ int main(int argc, char** argv) {
     std::cout << "rendered " << hd.gray.size() << " HD frames in " << msSince(t0) / 1000.0 << " s\n";
     for (const Timed& t : timed) {
       if (t.key == "auto" || !wanted(t.key.substr(0, t.key.find('_')))) continue;
-      const Speed s = speed(t.method, t.model, hd.gray, 3.0);
+      const Speed s = speed(t.method, t.model, hd.gray, hd.stamps_s, 3.0);
       json.set(t.key + "_fps_hd", s.wall_fps);
       json.set(t.key + "_fps_hd_cpu", s.cpu_fps);
       printSpeed(t.key + " HD", s);

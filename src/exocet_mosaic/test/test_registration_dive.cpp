@@ -213,14 +213,15 @@ std::vector<Eigen::Matrix3d> SimulatedDive::truth_;
 TEST_F(SimulatedDive, EveryMethodMeetsTheAccuracyTargets) {
   ASSERT_EQ(dive_->gray.size(), 125u);
   for (RegistrationMethod method : {RegistrationMethod::kKlt, RegistrationMethod::kRmr, RegistrationMethod::kAuto}) {
-    std::unique_ptr<FrameRegistrar> r = makeRegistrar(config(method, MotionModel::kHomography));
-    const SequenceScore s = evaluateSequence(*r, dive_->gray, truth_);
-    const SequenceScore dark = evaluateSequence(*r, dive_->gray, truth_, 2.0,
-                                                [&](int i) { return dive_->light_gain[i] < 1.0; });
-    const SequenceScore turbid = evaluateSequence(*r, dive_->gray, truth_, 2.0,
-                                                  [&](int i) { return dive_->turbidity[i] > 1.0; });
+    SequenceRegistrar r(makeRegistrar(config(method, MotionModel::kHomography)), SequenceRegistrarConfig());
+    const std::vector<double>& t = dive_->stamps_s;
+    const SequenceScore s = evaluateSequence(r, dive_->gray, t, truth_);
+    const SequenceScore dark =
+        evaluateSequence(r, dive_->gray, t, truth_, 2.0, [&](int i) { return dive_->light_gain[i] < 1.0; });
+    const SequenceScore turbid =
+        evaluateSequence(r, dive_->gray, t, truth_, 2.0, [&](int i) { return dive_->turbidity[i] > 1.0; });
     const SequenceScore clear = evaluateSequence(
-        *r, dive_->gray, truth_, 2.0, [&](int i) { return dive_->turbidity[i] == 1.0 && dive_->light_gain[i] == 1.0; });
+        r, dive_->gray, t, truth_, 2.0, [&](int i) { return dive_->turbidity[i] == 1.0 && dive_->light_gain[i] == 1.0; });
     std::cout << toString(method) << ": median " << s.median_px << " px, p95 " << s.p95_px << " px, failures "
               << s.failures << ", gross " << s.gross_failures << ", NEES ratio " << s.nees_ratio
               << "; dark stretch: median " << dark.median_px << " p95 " << dark.p95_px << " px over "
@@ -239,8 +240,9 @@ TEST_F(SimulatedDive, EveryMethodMeetsTheAccuracyTargets) {
 
 TEST_F(SimulatedDive, TheSimilarityModelIsLimitedByPerspectiveOnly) {
   // The vehicle rolls and pitches by 2 degrees: a similarity cannot follow, but stays within half a pixel.
-  std::unique_ptr<FrameRegistrar> r = makeRegistrar(config(RegistrationMethod::kKlt, MotionModel::kSimilarity));
-  const SequenceScore s = evaluateSequence(*r, dive_->gray, truth_);
+  SequenceRegistrar r(makeRegistrar(config(RegistrationMethod::kKlt, MotionModel::kSimilarity)),
+                      SequenceRegistrarConfig());
+  const SequenceScore s = evaluateSequence(r, dive_->gray, dive_->stamps_s, truth_);
   EXPECT_LE(s.median_px, 0.6);
   EXPECT_EQ(s.gross_failures, 0);
 }

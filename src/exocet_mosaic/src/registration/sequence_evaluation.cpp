@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include <Eigen/Dense>
 
@@ -75,19 +77,25 @@ SequenceScore summarize(std::vector<PairScore> pairs, double gross_threshold_px)
   return score;
 }
 
-SequenceScore evaluateSequence(FrameRegistrar& registrar, const std::vector<cv::Mat>& frames,
-                               const std::vector<Eigen::Matrix3d>& truth, double gross_threshold_px,
-                               const std::function<bool(int)>& select) {
-  registrar.reset();
+SequenceScore evaluateSequence(SequenceRegistrar& sequence, const std::vector<cv::Mat>& frames,
+                               const std::vector<double>& stamps_s, const std::vector<Eigen::Matrix3d>& truth,
+                               double gross_threshold_px, const std::function<bool(int)>& select) {
+  if (stamps_s.size() != frames.size() || truth.size() != frames.size())
+    throw std::invalid_argument("evaluateSequence: " + std::to_string(frames.size()) + " frames, " +
+                                std::to_string(stamps_s.size()) + " stamps and " + std::to_string(truth.size()) +
+                                " true motions: they must be as many");
+  sequence.restart();
   std::vector<PairScore> pairs;
-  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
   for (size_t i = 0; i < frames.size(); ++i) {
     const auto start = std::chrono::steady_clock::now();
-    MotionEstimate e = registrar.registerNext(frames[i], prediction);
-    // Constant velocity, as registration_node predicts: the previous motion starts the next estimation.
-    prediction = e.failed ? Eigen::Matrix3d::Identity() : e.pixel_matrix;
+    const SequenceStep step = sequence.add(frames[i], stamps_s[i]);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     if (i == 0 || (select && !select(int(i)))) continue;
+    MotionEstimate e = step.motion;
+    if (!step.has_motion) {  // a restart: no motion for this pair
+      e = MotionEstimate();
+      e.failure_detail = step.restart_reason;
+    }
     PairScore s = scorePair(e, truth[i], frames[i].cols, frames[i].rows);
     s.index = int(i);
     s.elapsed_ms = ms;

@@ -31,9 +31,9 @@ RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private
   params.readTopic("motion_topic", &config.motion_topic);
   config.camera_info_topic = image_transport::getCameraInfoTopic(config.image_topic);
   params.readTopic("camera_info_topic", &config.camera_info_topic);
-  params.readBool("undistort", &config.undistort,
+  params.readBool("undistort", &config.sequence.undistort,
                   "undistort the images with the camera_info's distortion coefficients before registering them");
-  params.readPositiveDouble("max_gap_s", &config.max_gap_s, 3600.0,
+  params.readPositiveDouble("max_gap_s", &config.sequence.max_gap_s, 3600.0,
                             "seconds between two images beyond which the sequence restarts");
   params.readInt("queue_size", &config.queue_size, 1, 1000, "images waiting to be registered");
   params.readDouble("expected_rate_hz", &config.expected_rate_hz, 0.0, 1000.0,
@@ -47,7 +47,7 @@ RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private
 
 RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh), private_nh_(private_nh), config_(readRegistrationNodeConfig(private_nh)), image_transport_(nh) {
-  registrar_ = reg::makeRegistrar(config_.registration);
+  sequence_ = std::make_unique<reg::SequenceRegistrar>(reg::makeRegistrar(config_.registration), config_.sequence);
   motion_publisher_ = nh_.advertise<exocet_msgs::ImageMotion>(config_.motion_topic, 100);
   if (config_.transport != "compressed")
     raw_subscriber_ = image_transport_.subscribe(config_.image_topic, config_.queue_size, &RegistrationRos::onImage,
@@ -121,7 +121,14 @@ void RegistrationRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& m
   process(decoded.image, decoded.encoding, msg->header);
 }
 
-void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) { camera_info_ = msg; }
+void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+  reg::CameraCalibration calibration;
+  calibration.size = cv::Size(int(msg->width), int(msg->height));
+  std::copy(msg->K.begin(), msg->K.end(), calibration.k.begin());
+  for (size_t i = 0; i < std::min<size_t>(5, msg->D.size()); ++i) calibration.d[i] = msg->D[i];
+  calibration.distortion_model = msg->distortion_model;
+  sequence_->setCalibration(calibration);
+}
 
 void RegistrationRos::reject(const std::string& why) {
   ++rejected_;
@@ -161,7 +168,7 @@ void RegistrationRos::onReconfigure(exocet_mosaic::RegistrationConfig& c, uint32
     c.illumination_enabled = config_.registration.illumination.enabled;
     return;
   }
-  if (registrar_) {  // not on the server's first call, which only echoes the start values
+  if (sequence_) {  // not on the server's first call, which only echoes the start values
     const bool changed = next.method != config_.registration.method || next.model != config_.registration.model ||
                          next.klt.max_features != config_.registration.klt.max_features ||
                          next.klt.min_tracks != config_.registration.klt.min_tracks ||
@@ -169,9 +176,10 @@ void RegistrationRos::onReconfigure(exocet_mosaic::RegistrationConfig& c, uint32
     if (!changed) return;
   }
   config_.registration = next;
-  registrar_ = std::move(registrar);
-  have_previous_ = false;  // the new registrar starts its sequence at the next image
-  last_motion_ = reg::MotionEstimate();
+  if (sequence_)
+    sequence_->replaceRegistrar(std::move(registrar));  // the new registrar starts its sequence at the next image
+  else
+    sequence_ = std::make_unique<reg::SequenceRegistrar>(std::move(registrar), config_.sequence);
   ++reconfigurations_;
   updater_.setHardwareID("registration " + reg::toString(next.method));
   ROS_INFO("registration: reconfigured: method %s, model %s, KLT %d features / %d tracks, illumination %s",
@@ -179,13 +187,10 @@ void RegistrationRos::onReconfigure(exocet_mosaic::RegistrationConfig& c, uint32
            c.illumination_enabled ? "on" : "off");
 }
 
-void RegistrationRos::restart(const std::string& why) {
+void RegistrationRos::noteRestart(const std::string& why) {
   ++restarts_;
   last_problem_ = why;
   ROS_WARN_THROTTLE(5.0, "registration: restarting the sequence: %s", why.c_str());
-  registrar_->reset();
-  have_previous_ = false;
-  last_motion_ = reg::MotionEstimate();
 }
 
 void RegistrationRos::process(const cv::Mat& image, const std::string& encoding, const std_msgs::Header& header) {
@@ -202,76 +207,27 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
     reject("image with a zero stamp: the motion would have no time");
     return;
   }
-  if (config_.undistort && camera_info_) {
-    const sensor_msgs::CameraInfo& info = *camera_info_;
-    const cv::Size info_size(int(info.width), int(info.height));
-    std::array<double, 9> k{};
-    std::array<double, 5> d{};
-    std::copy(info.K.begin(), info.K.end(), k.begin());
-    for (size_t i = 0; i < std::min<size_t>(5, info.D.size()); ++i) d[i] = info.D[i];
-    if (info.distortion_model != "plumb_bob" && info.distortion_model != "rational_polynomial" &&
-        !info.distortion_model.empty()) {
-      last_problem_ = "camera_info distortion model '" + info.distortion_model + "' is not supported (plumb_bob)";
-      ROS_WARN_THROTTLE(30.0, "registration: %s; registering the images as they are", last_problem_.c_str());
-    } else if (info_size == gray.size() && !undistorter_.sameCalibration(info_size, k, d)) {
-      try {
-        reg::ImageUndistorter next(info_size, k, d);
-        // Only a change of the image geometry breaks the sequence (not a first camera_info without distortion).
-        const bool geometry_changes = undistorter_.active() || next.active();
-        undistorter_ = next;
-        if (have_previous_ && geometry_changes) restart("the camera calibration changed");
-        ROS_INFO("registration: %s", undistorter_.active() ? "undistorting the images with the camera_info"
-                                                           : "the camera_info has no distortion");
-      } catch (const std::invalid_argument& e) {
-        last_problem_ = std::string("camera_info unusable: ") + e.what();
-        ROS_WARN_THROTTLE(30.0, "registration: %s", last_problem_.c_str());
-      }
-    }
-  }
-  if (undistorter_.active()) {
-    if (gray.size() == undistorter_.size()) {
-      gray = undistorter_.apply(gray);
-    } else {
-      ROS_WARN_THROTTLE(30.0, "registration: image size %dx%d differs from the camera_info's %dx%d: not undistorted",
-                        gray.cols, gray.rows, undistorter_.size().width, undistorter_.size().height);
-    }
-  }
-
-  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
-  double period_s = 0.0;
-  if (have_previous_) {
-    period_s = (header.stamp - previous_stamp_).toSec();
-    std::ostringstream why;
-    if (period_s <= 0.0) {
-      why << "image stamps went back by " << -period_s << " s (bag replayed again or clock jump)";
-      restart(why.str());
-    } else if (period_s > config_.max_gap_s) {
-      why << "gap of " << period_s << " s between images exceeds ~max_gap_s = " << config_.max_gap_s << " s";
-      restart(why.str());
-    } else if (gray.size() != previous_size_) {
-      why << "image size changed from " << previous_size_.width << "x" << previous_size_.height << " to " << gray.cols
-          << "x" << gray.rows;
-      restart(why.str());
-    } else if (!last_motion_.failed && previous_period_s_ > 0.0) {
-      // Constant velocity: the previous motion scaled to this interval bridges dropped frames.
-      const double ratio = std::min(period_s / previous_period_s_, 4.0);
-      prediction = reg::pixelMatrix(last_motion_.model, ratio * last_motion_.parameters, last_motion_.centre_px);
-    }
-  }
-  if (!have_previous_) {
-    registrar_->reset();
-    registrar_->registerNext(gray);  // keeps the image as the first of the next pair
-    have_previous_ = true;
-    previous_stamp_ = header.stamp;
-    previous_size_ = gray.size();
-    previous_period_s_ = 0.0;
+  reg::SequenceStep step;
+  try {
+    step = sequence_->add(gray, header.stamp.toSec());
+  } catch (const std::invalid_argument& e) {
+    reject(e.what());
     return;
   }
+  // The stamp of the image this motion starts from, exactly as it arrived (a double would not round-trip).
+  const ros::Time previous_stamp = previous_stamp_;
+  previous_stamp_ = header.stamp;
+  if (!step.calibration_warning.empty()) {
+    last_problem_ = step.calibration_warning;
+    ROS_WARN_THROTTLE(30.0, "registration: %s", step.calibration_warning.c_str());
+  }
+  if (!step.restart_reason.empty()) noteRestart(step.restart_reason);
+  if (!step.has_motion) return;
 
-  const reg::MotionEstimate estimate = registrar_->registerNext(gray, prediction);
+  const reg::MotionEstimate& estimate = step.motion;
   exocet_msgs::ImageMotion msg;
   msg.header = header;
-  msg.previous_stamp = previous_stamp_;
+  msg.previous_stamp = previous_stamp;
   msg.method = reg::toString(estimate.method);
   msg.model = reg::toString(estimate.model);
   for (int r = 0; r < 3; ++r)
@@ -292,13 +248,12 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
   msg.inlier_fraction = static_cast<float>(estimate.inlier_fraction);
   msg.residual_scale = static_cast<float>(estimate.residual_scale);
   msg.processing_ms = static_cast<float>(estimate.elapsed_ms);
-  msg.image_width = static_cast<uint32_t>(gray.cols);
-  msg.image_height = static_cast<uint32_t>(gray.rows);
-  msg.undistorted = undistorter_.active() && gray.size() == undistorter_.size();
-  if (camera_info_ && camera_info_->width == msg.image_width && camera_info_->height == msg.image_height) {
-    const Eigen::Matrix3d& k = undistorter_.cameraMatrix();
+  msg.image_width = static_cast<uint32_t>(step.image_size.width);
+  msg.image_height = static_cast<uint32_t>(step.image_size.height);
+  msg.undistorted = step.undistorted;
+  if (step.camera_matrix) {
     for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) msg.camera_matrix[3 * r + c] = msg.undistorted ? k(r, c) : camera_info_->K[3 * r + c];
+      for (int c = 0; c < 3; ++c) msg.camera_matrix[3 * r + c] = (*step.camera_matrix)(r, c);
   }
   motion_publisher_.publish(msg);
 
@@ -316,9 +271,6 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
     recent_inlier_fraction_.push_back(estimate.inlier_fraction);
     if (int(recent_inlier_fraction_.size()) > config_.quality_window) recent_inlier_fraction_.pop_front();
   }
-  last_motion_ = estimate;
-  previous_period_s_ = period_s;
-  previous_stamp_ = header.stamp;
 }
 
 void RegistrationRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
@@ -342,7 +294,7 @@ void RegistrationRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
     status.summary(DiagnosticStatus::OK, "registering");
   status.add("method", reg::toString(config_.registration.method));
   status.add("model", reg::toString(config_.registration.model));
-  status.add("undistorting", undistorter_.active() ? std::string("yes") : std::string("no"));
+  status.add("undistorting", sequence_->undistorter().active() ? std::string("yes") : std::string("no"));
   status.add("transport", active_transport_.empty() ? std::string("none yet") : active_transport_);
   status.add("images received", images_);
   status.add("images rejected", rejected_);

@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "exocet_mosaic/registration/frame_registrar.h"
+#include "exocet_mosaic/registration/sequence_registrar.h"
 
 namespace exocet_mosaic {
 namespace registration {
@@ -46,14 +47,16 @@ struct SequenceScore {
 SequenceScore summarize(std::vector<PairScore> pairs, double gross_threshold_px = 2.0);
 
 /**
- * Runs `registrar` (after reset()) over `frames` with registerNext, each estimation starting from the previous
- * motion (constant velocity, as registration_node does), and scores every pair against `truth`
- * (truth[i] maps frame i-1 to frame i; truth[0] is not used). `select`, if given, says which pairs count (e.g. one
- * segment of a dive); all pairs are registered regardless, so that the registrar's state is that of a real run.
+ * Feeds `frames`, taken at `stamps_s`, through `sequence` (restarted first), the front-end registration_node runs:
+ * each estimation starts from the previous motion scaled to the frame interval. Every pair is scored against
+ * `truth` (truth[i] maps frame i-1 to frame i; truth[0] is not used); a frame that restarts the sequence counts as a
+ * failed pair. `select`, if given, says which pairs count (e.g. one segment of a dive); all pairs are registered
+ * regardless, so that the registrar's state is that of a real run.
+ * @throws std::invalid_argument if the sizes of `frames`, `stamps_s` and `truth` differ.
  */
-SequenceScore evaluateSequence(FrameRegistrar& registrar, const std::vector<cv::Mat>& frames,
-                               const std::vector<Eigen::Matrix3d>& truth, double gross_threshold_px = 2.0,
-                               const std::function<bool(int)>& select = nullptr);
+SequenceScore evaluateSequence(SequenceRegistrar& sequence, const std::vector<cv::Mat>& frames,
+                               const std::vector<double>& stamps_s, const std::vector<Eigen::Matrix3d>& truth,
+                               double gross_threshold_px = 2.0, const std::function<bool(int)>& select = nullptr);
 
 /// The score of one estimate against the true pixel matrix of a width x height image pair.
 PairScore scorePair(const MotionEstimate& estimate, const Eigen::Matrix3d& truth, int width, int height);

@@ -21,8 +21,8 @@
 #include <sensor_msgs/Image.h>
 
 #include "exocet_mosaic/registration/gray_converter.h"
-#include "exocet_mosaic/registration/image_undistorter.h"
 #include "exocet_mosaic/registration/registration_config.h"
+#include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/ros/dive_topics.h"
 
 namespace exocet_mosaic {
@@ -30,6 +30,7 @@ namespace exocet_mosaic {
 /// Settings of the registration node; each is the private parameter of the same name (see readRegistrationNodeConfig).
 struct RegistrationNodeConfig {
   registration::RegistrationConfig registration;  ///< ~method, ~model, ~klt/..., ~rmr/...
+  registration::SequenceRegistrarConfig sequence;  ///< ~max_gap_s, ~undistort
   std::string image_topic = topics::kImageRaw;    ///< sensor_msgs/Image; `<image_topic>/compressed` is also watched
   /// auto: the first of raw (image_transport) and `<image_topic>/compressed` that delivers; raw; compressed. The
   /// compressed topic is decoded here because Debian's ROS has no compressed_image_transport plugin.
@@ -37,10 +38,6 @@ struct RegistrationNodeConfig {
   std::string motion_topic = topics::kMosaicMotion;  ///< exocet_msgs/ImageMotion
   /// sensor_msgs/CameraInfo; empty: the image topic's sibling camera_info (image_transport's convention)
   std::string camera_info_topic;
-  /// Undistort the images with the camera_info's plumb_bob coefficients before registering them (the motion
-  /// between two views of a flat seabed is a homography only without distortion).
-  bool undistort = true;
-  double max_gap_s = 1.0;              ///< a longer gap between two images restarts the sequence (0, 3600] s
   int queue_size = 30;                 ///< subscriber queue (images) [1, 1000]
   double expected_rate_hz = 0.0;       ///< nominal camera rate for /diagnostics, 0 = unknown [0, 1000]
   int quality_window = 50;             ///< pairs over which /diagnostics computes the failure fraction [5, 10000]
@@ -54,14 +51,13 @@ struct RegistrationNodeConfig {
 RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private_nh);
 
 /**
- * @brief Registers each image against the previous one and publishes the motion.
+ * @brief Converts and wires: images and camera_info in, handed to a registration::SequenceRegistrar (the policy:
+ * undistortion, restarts, prediction, fallback), one exocet_msgs/ImageMotion per image pair out.
  *
- * Every image pair gives one message, failures included (failed = true, with the reason). The sequence restarts
- * (no message for that image) after a gap longer than ~max_gap_s, when the stamps go backwards (a bag replayed
- * again, a clock jump) and when the image size changes; dropped frames within the gap are bridged, the previous
- * motion scaled to the gap being the starting guess. Undecodable images, unsupported encodings and data that does
- * not match its header are counted, logged (throttled) and skipped. Counts, rates, failures by reason, inliers and
- * processing time are on /diagnostics.
+ * Every image pair gives one message, failures included (failed = true, with the reason); the first image of a
+ * sequence gives none (see SequenceRegistrar for when a sequence restarts). Undecodable images, unsupported
+ * encodings and data that does not match its header are counted, logged (throttled) and skipped. Counts, rates,
+ * failures by reason, inliers and processing time are on /diagnostics.
  */
 class RegistrationRos {
  public:
@@ -76,14 +72,14 @@ class RegistrationRos {
   bool acceptTransport(const std::string& transport);
   void process(const cv::Mat& image, const std::string& encoding, const std_msgs::Header& header);
   void reject(const std::string& why);
-  void restart(const std::string& why);
+  void noteRestart(const std::string& why);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   void onReconfigure(exocet_mosaic::RegistrationConfig& config, uint32_t level);
 
   ros::NodeHandle nh_;
   ros::NodeHandle private_nh_;
   RegistrationNodeConfig config_;
-  std::unique_ptr<registration::FrameRegistrar> registrar_;
+  std::unique_ptr<registration::SequenceRegistrar> sequence_;
   // The operator's knobs (method, model, ...). Node and nodelet run the callbacks on one thread (ST node handles).
   std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::RegistrationConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
@@ -94,8 +90,7 @@ class RegistrationRos {
   image_transport::Subscriber raw_subscriber_;
   ros::Subscriber compressed_subscriber_;
   ros::Subscriber camera_info_subscriber_;
-  sensor_msgs::CameraInfoConstPtr camera_info_;
-  registration::ImageUndistorter undistorter_;
+  ros::Time previous_stamp_;  ///< of the last image the sequence accepted
   std::string active_transport_;
   ros::Publisher motion_publisher_;
 
@@ -103,13 +98,6 @@ class RegistrationRos {
   std::unique_ptr<diagnostic_updater::FrequencyStatus> image_rate_;
   double min_rate_hz_ = 0.0, max_rate_hz_ = 0.0;
   ros::SteadyTimer diagnostics_timer_;
-
-  // Sequence state.
-  bool have_previous_ = false;
-  ros::Time previous_stamp_;
-  cv::Size previous_size_;
-  double previous_period_s_ = 0.0;
-  registration::MotionEstimate last_motion_;
 
   // Counts for /diagnostics.
   uint64_t images_ = 0, rejected_ = 0, pairs_ = 0, failures_ = 0, restarts_ = 0;
