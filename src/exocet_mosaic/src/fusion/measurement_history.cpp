@@ -46,7 +46,28 @@ bool bracket(const Samples& samples, double t, double max_gap_s, size_t* lo, siz
   return true;
 }
 
+template <typename Samples>
+std::vector<typename Samples::value_type> samplesBetween(const Samples& samples, double from_s, double to_s) {
+  std::vector<typename Samples::value_type> out;
+  for (size_t k = lowerBound(samples, from_s); k < samples.size() && samples[k].first <= to_s; ++k)
+    out.push_back(samples[k]);
+  return out;
+}
+
 }  // namespace
+
+std::vector<std::pair<double, Eigen::Quaterniond>> AttitudeHistory::between(double from_s, double to_s) const {
+  return samplesBetween(samples_, from_s, to_s);
+}
+
+std::optional<double> AttitudeHistory::newestStamp() const {
+  if (samples_.empty()) return std::nullopt;
+  return samples_.back().first;
+}
+
+std::vector<std::pair<double, double>> ScalarHistory::between(double from_s, double to_s) const {
+  return samplesBetween(samples_, from_s, to_s);
+}
 
 void AttitudeHistory::add(double stamp_s, const Eigen::Quaterniond& world_from_body) {
   addSample(&samples_, stamp_s, world_from_body.normalized(), window_s_);

@@ -111,6 +111,11 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                             "attitude samples further apart are not interpolated (s)");
   params.readPositiveDouble("altitude_max_gap_s", &c.altitude_max_gap_s, 600.0,
                             "altimeter samples further apart are not interpolated (s)");
+  params.readDouble("view_half_window_s", &c.view_half_window_s, 0.0, 10.0,
+                    "roll, pitch and altimeter range are fitted over +-this many seconds at each image, 0: "
+                    "interpolated");
+  params.readDouble("altimeter_sigma_m", &c.altimeter_sigma_m, 0.0, 10.0,
+                    "1-sigma of one altimeter range (m), 0 = taken as exact");
 
   params.readDouble("initial_latitude_deg", &c.initial_latitude_deg, -90.0, 90.0,
                     "first position's WGS 84 latitude (degrees), unset for none");

@@ -7,9 +7,7 @@
 
 #include <geometry_msgs/TransformStamped.h>
 
-#include "exocet_mosaic/fusion/image_heading.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
-#include "exocet_mosaic/registration/motion_model.h"
 #include "exocet_mosaic/sim/atomic_file.h"
 
 namespace exocet_mosaic {
@@ -18,8 +16,6 @@ using diagnostic_msgs::DiagnosticStatus;
 namespace fu = fusion;
 
 namespace {
-
-bool finite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(); }
 
 /// A 2x2 covariance that is one: finite, symmetric enough, positive definite.
 bool validCovariance(const Eigen::Matrix2d& c) {
@@ -38,22 +34,23 @@ bool validOrientation(const geometry_msgs::Quaternion& q) {
 /// ENU yaw (counter-clockwise from east) from a grid heading (clockwise from north).
 double enuYawFromHeading_rad(double heading_rad) { return M_PI / 2.0 - heading_rad; }
 
-Eigen::Quaterniond levelAttitude(double enu_yaw_rad) {
-  return Eigen::Quaterniond(Eigen::AngleAxisd(enu_yaw_rad, Eigen::Vector3d::UnitZ()));
-}
-
 }  // namespace
 
 FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh),
       private_nh_(private_nh),
       config_(readFusionNodeConfig(private_nh)),
-      filter_(config_.filter),
-      tf_listener_(tf_buffer_),
-      imu_attitude_(30.0, config_.attitude_max_gap_s),
-      nav_attitude_(30.0, config_.attitude_max_gap_s),
-      altimeter_range_m_(30.0, config_.altitude_max_gap_s) {
-  filter_.setKeepLog(config_.keep_smoother_log);
+      tf_listener_(tf_buffer_) {
+  fu::FusionFrontEndConfig front_end;
+  front_end.filter = config_.filter;
+  front_end.keep_log = config_.keep_smoother_log;
+  front_end.attitude_max_gap_s = config_.attitude_max_gap_s;
+  front_end.altitude_max_gap_s = config_.altitude_max_gap_s;
+  front_end.view_half_window_s = config_.view_half_window_s;
+  front_end.altimeter_sigma_m = config_.altimeter_sigma_m;
+  front_end.base_frame = config_.base_frame;
+  front_end.default_camera_frame = config_.camera_frame;
+  front_end_ = std::make_unique<fu::FusionFrontEnd>(front_end, [this](const std::string& frame) { return mountOf(frame); });
   if (config_.utm_zone > 0) {
     grid_ = fu::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
     grid_source_ = "parameter ~utm_zone";
@@ -96,11 +93,15 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
   initializeFromParameters();
+  if (config_.view_half_window_s > config_.reorder_delay_s)
+    ROS_WARN("fusion: ~view_half_window_s (%.2f s) is longer than ~reorder_delay_s (%.2f s): an image's view is fitted "
+             "before its window's later samples arrive",
+             config_.view_half_window_s, config_.reorder_delay_s);
   reconfigure_server_ =
       std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>>(reconfigure_mutex_, private_nh_);
   exocet_mosaic::FusionConfig start;
-  start.gate_probability = filter_.config().gate_probability;
-  start.recovery_rejections = filter_.config().recovery_rejections;
+  start.gate_probability = front_end_->filter().config().gate_probability;
+  start.recovery_rejections = front_end_->filter().config().recovery_rejections;
   reconfigure_server_->updateConfig(start);
   reconfigure_server_->setCallback([this](exocet_mosaic::FusionConfig& c, uint32_t level) { onReconfigure(c, level); });
   ROS_INFO("fusion: motion %s, dead reckoning %s, fixes %s, attitude %s, altitude %s; odometry on %s",
@@ -138,12 +139,7 @@ void FusionRos::resetAll(const std::string& why) {
   ++resets_;
   last_problem_ = "reset: " + why;
   ROS_WARN_THROTTLE(1.0, "fusion: resetting the filter and the tracks: %s", why.c_str());
-  filter_.reset();
-  imu_attitude_.clear();
-  nav_attitude_.clear();
-  altimeter_range_m_.clear();
-  image_only_en_m_.reset();
-  last_dr_camera_en_m_.reset();
+  front_end_->reset();
   have_stamp_ = false;
   awaiting_motion_.clear();
   newest_motion_stamp_s_ = -1e300;
@@ -218,50 +214,28 @@ std::optional<Eigen::Isometry3d> FusionRos::mountOf(const std::string& frame) {
   }
 }
 
-std::optional<Eigen::Quaterniond> FusionRos::attitudeAt(double stamp_s) const {
-  if (auto q = imu_attitude_.at(stamp_s)) return q;
-  if (auto q = nav_attitude_.at(stamp_s)) return q;
-  return std::nullopt;
-}
-
-std::optional<double> FusionRos::cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
-                                                const Eigen::Isometry3d& base_from_camera) {
-  if (!altimeter_frame_.empty()) {
-    if (const auto range_m = altimeter_range_m_.at(stamp_s)) {
-      if (const auto altimeter = mountOf(altimeter_frame_)) {
-        const double height_m = fu::cameraHeightFromAltimeter_m(*range_m, world_from_base, altimeter->translation(),
-                                                                base_from_camera.translation());
-        if (std::isfinite(height_m) && height_m > 0.0) return height_m;
-      }
-    }
-  }
-  return operator_height_m_;
-}
-
 // ---------------------------------------------------------------------------------------------------------------
 // Initialisation.
 
-void FusionRos::initializeFilter(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m,
-                                 const std::string& source) {
-  filter_.initialize(stamp_s, camera_en_m, Eigen::Matrix2d::Identity() * sigma_m * sigma_m);
-  image_only_en_m_ = camera_en_m;
-  ensureMapOrigin(camera_en_m);
-  ROS_INFO("fusion: initialised from %s at E %.2f N %.2f (1-sigma %.2f m)", source.c_str(), camera_en_m.x(),
-           camera_en_m.y(), sigma_m);
+void FusionRos::onStarted(const std::string& source) {
+  const fu::FilterState s = front_end_->filter().current();
+  ensureMapOrigin(s.position_en_m);
+  ROS_INFO("fusion: initialised from %s at E %.2f N %.2f (1-sigma %.2f m)", source.c_str(), s.position_en_m.x(),
+           s.position_en_m.y(), std::sqrt(s.position_covariance_m2.trace() / 2.0));
 }
 
 void FusionRos::initializeFromParameters() {
   const FusionNodeConfig& c = config_;
   if (std::isfinite(c.initial_heading_deg))
-    operator_heading_rad_ = enuYawFromHeading_rad(c.initial_heading_deg * M_PI / 180.0);
-  if (std::isfinite(c.initial_altitude_m)) operator_height_m_ = c.initial_altitude_m;
+    front_end_->setOperatorHeading(enuYawFromHeading_rad(c.initial_heading_deg * M_PI / 180.0));
+  if (std::isfinite(c.initial_altitude_m)) front_end_->setOperatorHeight(c.initial_altitude_m);
   if (std::isfinite(c.initial_latitude_deg) && std::isfinite(c.initial_longitude_deg)) {
-    pending_initial_en_m_ = gridFor(c.initial_latitude_deg, c.initial_longitude_deg)
-                                ->toGrid(c.initial_latitude_deg, c.initial_longitude_deg);
+    front_end_->setOperatorStart(gridFor(c.initial_latitude_deg, c.initial_longitude_deg)
+                                     ->toGrid(c.initial_latitude_deg, c.initial_longitude_deg),
+                                 c.initial_sigma_m);
   } else if (std::isfinite(c.initial_easting_m) && std::isfinite(c.initial_northing_m)) {
-    pending_initial_en_m_ = Eigen::Vector2d(c.initial_easting_m, c.initial_northing_m);
+    front_end_->setOperatorStart(Eigen::Vector2d(c.initial_easting_m, c.initial_northing_m), c.initial_sigma_m);
   }
-  pending_initial_sigma_m_ = c.initial_sigma_m;
 }
 
 bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
@@ -284,15 +258,15 @@ bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
             ? gridFor(request.latitude_deg, request.longitude_deg)->toGrid(request.latitude_deg, request.longitude_deg)
             : Eigen::Vector2d(request.easting_m, request.northing_m);
     if (std::isfinite(request.heading_deg))
-      operator_heading_rad_ = enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0);
-    if (std::isfinite(request.altitude_m)) operator_height_m_ = request.altitude_m;
-    pending_initial_en_m_ = en;
-    pending_initial_sigma_m_ = request.position_sigma_m;
-    if (filter_.initialized()) {
+      front_end_->setOperatorHeading(enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0));
+    if (std::isfinite(request.altitude_m)) front_end_->setOperatorHeight(request.altitude_m);
+    front_end_->setOperatorStart(en, request.position_sigma_m);
+    if (front_end_->filter().initialized()) {
       // Re-seeding during a dive: start again from the given point at the newest stamp.
-      filter_.reset();
-      initializeFilter(newest_stamp_s_, en, request.position_sigma_m, "~set_initial_pose");
-      pending_initial_en_m_.reset();
+      front_end_->filter().reset();
+      front_end_->initialize(newest_stamp_s_, en,
+                             Eigen::Matrix2d::Identity() * std::pow(request.position_sigma_m, 2));
+      onStarted("~set_initial_pose");
     }
     what << std::fixed << std::setprecision(2) << "position E " << en.x() << " N " << en.y() << " (1-sigma "
          << request.position_sigma_m << " m)";
@@ -346,7 +320,7 @@ void FusionRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
     return;
   }
   if (!admitStamp(msg->header.stamp, "imu", false)) return;
-  imu_attitude_.add(msg->header.stamp.toSec(), toEigen(msg->orientation));
+  front_end_->addImuAttitude(msg->header.stamp.toSec(), toEigen(msg->orientation));
 }
 
 void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
@@ -362,8 +336,7 @@ void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
     rejectInput("altitude", "empty frame_id: the altimeter's mount on the vehicle is unknown");
     return;
   }
-  altimeter_frame_ = msg->header.frame_id;
-  altimeter_range_m_.add(msg->header.stamp.toSec(), r);
+  front_end_->addAltimeterRange(msg->header.stamp.toSec(), r, msg->header.frame_id);
 }
 
 void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
@@ -373,7 +346,7 @@ void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
     rejectInput("camera_info", "K has a non-positive or non-finite focal length");
     return;
   }
-  camera_info_matrix_ = k;
+  front_end_->setCameraMatrix(k);
   // An image is on its way through the registration: what follows it waits for its motion.
   const double t = msg->header.stamp.toSec();
   if (motion_seen_ && config_.motion_wait_s > 0.0 && !msg->header.stamp.isZero() && t > newest_motion_stamp_s_) {
@@ -387,7 +360,7 @@ void FusionRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
   try {
     fu::UtmGrid grid = fu::UtmGrid::fromZone(msg->utm_zone, msg->northern_hemisphere);
     if (!grid_ || grid_->zone() != grid.zone() || grid_->northern() != grid.northern()) {
-      if (grid_ && filter_.initialized())
+      if (grid_ && front_end_->filter().initialized())
         ROS_WARN("fusion: /nav/datum gives zone %s, but %s was in use from %s: keeping it", grid.name().c_str(),
                  grid_->name().c_str(), grid_source_.c_str());
       else {
@@ -449,29 +422,15 @@ void FusionRos::processDeadReckoning(const ros::Time& stamp, const Eigen::Vector
   }
   (void)frame_id;
   const double t = stamp.toSec();
-  if (world_from_base) nav_attitude_.add(t, *world_from_base);
+  if (world_from_base) front_end_->addNavigationAttitude(t, *world_from_base);
   last_nav_wall_ = ros::WallTime::now();
   ++dead_reckonings_;
   enqueue(t, [this, t, base_en_m, covariance_m2, stamp]() {
-    // The camera's position from base_link's: lever arm turned by the attitude when it is known.
-    Eigen::Vector2d camera_en = base_en_m.head<2>();
-    const auto attitude = attitudeAt(t);
-    const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
-    if (attitude && camera) camera_en = fu::cameraPosition(base_en_m, *attitude, *camera).head<2>();
-    appendPath(&nav_path_, stamp, camera_en);
-    last_dr_camera_en_m_ = camera_en;
-    if (!filter_.initialized()) {
-      if (pending_initial_en_m_) {
-        initializeFilter(t, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
-        pending_initial_en_m_.reset();
-      } else {
-        initializeFilter(t, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the dead reckoning");
-        return;
-      }
-    }
-    countResult("dead reckoning", filter_.addDeadReckoning(t, camera_en, covariance_m2));
+    const fu::InputOutcome outcome = front_end_->addDeadReckoning(t, base_en_m, covariance_m2);
+    if (outcome.camera_en_m) appendPath(&nav_path_, stamp, *outcome.camera_en_m);
+    handleOutcome("dead reckoning", outcome);
     // Without images the navigation carries the fused track: publish at its rate.
-    if ((ros::WallTime::now() - last_motion_wall_).toSec() > 1.0) publishState(stamp);
+    if (outcome.update && (ros::WallTime::now() - last_motion_wall_).toSec() > 1.0) publishState(stamp);
   });
 }
 
@@ -502,28 +461,10 @@ void FusionRos::onUsbl(const sensor_msgs::NavSatFixConstPtr& msg) {
   const double t = msg->header.stamp.toSec();
   const Eigen::Vector2d fix_en = gridFor(msg->latitude, msg->longitude)->toGrid(msg->latitude, msg->longitude);
   const std::string frame = msg->header.frame_id;
-  enqueue(t, [this, t, fix_en, covariance, frame]() {
-    // The transponder is not the camera: move the fix by the lever arm between them.
-    Eigen::Vector2d camera_en = fix_en;
-    const auto attitude = attitudeAt(t);
-    const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
-    const auto transponder = frame.empty() || frame == config_.base_frame
-                                 ? std::optional<Eigen::Isometry3d>(Eigen::Isometry3d::Identity())
-                                 : mountOf(frame);
-    if (attitude && camera && transponder)
-      camera_en += (attitude->toRotationMatrix() * (camera->translation() - transponder->translation())).head<2>();
-    if (!filter_.initialized()) {
-      if (pending_initial_en_m_) {
-        initializeFilter(t, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
-        pending_initial_en_m_.reset();
-      } else if (config_.odometry_topic.empty() && config_.nav_fix_topic.empty()) {
-        initializeFilter(t, camera_en, std::sqrt(covariance.trace() / 2.0), "the first fix");
-        return;
-      } else {
-        return;  // the dead reckoning starts the filter
-      }
-    }
-    countResult("fix", filter_.addAbsoluteFix(t, camera_en, covariance));
+  // With no dead reckoning expected, the first fix starts the filter.
+  const bool may_start = config_.odometry_topic.empty() && config_.nav_fix_topic.empty();
+  enqueue(t, [this, t, fix_en, covariance, frame, may_start]() {
+    handleOutcome("fix", front_end_->addFix(t, fix_en, covariance, frame, may_start));
   });
 }
 
@@ -533,7 +474,7 @@ void FusionRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
     rejectInput("image motion", "previous_stamp is zero or after the stamp");
     return;
   }
-  if (!msg->header.frame_id.empty()) camera_frame_ = msg->header.frame_id;
+  front_end_->setCameraFrame(msg->header.frame_id);
   last_motion_wall_ = ros::WallTime::now();
   ++motions_;
   motion_seen_ = true;
@@ -546,99 +487,48 @@ void FusionRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
 }
 
 void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
-  const double t0 = msg.previous_stamp.toSec(), t1 = msg.header.stamp.toSec();
-  if (!filter_.initialized()) {
-    if (!pending_initial_en_m_) {
-      countResult("image motion", {fu::UpdateStatus::kNotInitialized, 0.0, ""});
-      return;
-    }
-    initializeFilter(t0, *pending_initial_en_m_, pending_initial_sigma_m_, "the operator's first point");
-    pending_initial_en_m_.reset();
-  }
-  auto fail = [&](const std::string& kind, const std::string& why) {
-    if (!kind.empty()) rejectInput(kind, why);
-    ++motion_failures_;
-    countResult("image failure", filter_.addImageFailure(t0, t1));
-    publishState(msg.header.stamp);
-  };
-  if (msg.failed) {
-    fail("", "");
-    return;
-  }
-  registration::MotionModel model;
-  try {
-    model = registration::motionModelFromString(msg.model);
-  } catch (const std::invalid_argument& e) {
-    fail("image motion", e.what());
-    return;
-  }
-  const int n = registration::parameterCount(model);
-  if (static_cast<int>(msg.parameters.size()) != n || static_cast<int>(msg.covariance.size()) != n * n) {
-    fail("image motion", "parameters/covariance sizes do not match the model " + msg.model);
-    return;
-  }
-  const Eigen::VectorXd parameters = Eigen::Map<const Eigen::VectorXd>(msg.parameters.data(), n);
-  const Eigen::MatrixXd covariance =
-      Eigen::Map<const Eigen::Matrix<double, -1, -1, Eigen::RowMajor>>(msg.covariance.data(), n, n);
-  if (!finite(parameters) || !finite(covariance)) {
-    fail("image motion", "non-finite parameters or covariance");
-    return;
-  }
-  fu::CameraMount mount;
-  Eigen::Matrix3d k = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.camera_matrix.data());
-  if (!(k(0, 0) > 0.0 && k(1, 1) > 0.0 && k.allFinite())) {
-    if (!camera_info_matrix_) {
-      fail("image motion", "no camera matrix in the message and no camera_info received");
-      return;
-    }
-    k = *camera_info_matrix_;
-  }
-  mount.camera_matrix = k;
-  const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
-  if (!camera) {
-    fail("", "");
-    return;
-  }
-  mount.base_from_camera = *camera;
+  fu::ImageMotionInput motion;
+  motion.previous_stamp_s = msg.previous_stamp.toSec();
+  motion.stamp_s = msg.header.stamp.toSec();
+  motion.failed = msg.failed;
+  motion.model = msg.model;
+  motion.parameters = Eigen::Map<const Eigen::VectorXd>(msg.parameters.data(), Eigen::Index(msg.parameters.size()));
+  // A covariance of the wrong size is passed on as it is: the front-end names the mismatch.
+  const auto n = Eigen::Index(msg.parameters.size());
+  if (n > 0 && Eigen::Index(msg.covariance.size()) == n * n)
+    motion.covariance = Eigen::Map<const Eigen::Matrix<double, -1, -1, Eigen::RowMajor>>(msg.covariance.data(), n, n);
+  else
+    motion.covariance = Eigen::MatrixXd::Zero(0, 0);
+  motion.centre_px = Eigen::Vector2d(msg.centre_px[0], msg.centre_px[1]);
+  motion.pixel_matrix = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
+  const Eigen::Matrix3d k = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.camera_matrix.data());
+  if (k(0, 0) > 0.0 && k(1, 1) > 0.0 && k.allFinite()) motion.camera_matrix = k;
 
-  // Attitude at both stamps: the sensors', or the operator's heading carried on by the image rotation.
-  std::optional<Eigen::Quaterniond> q0 = attitudeAt(t0), q1 = attitudeAt(t1);
-  const Eigen::Matrix3d pixel_matrix =
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
-  double yaw_change_rad = 0.0;
-  if ((!q0 || !q1) && operator_heading_rad_) {
-    yaw_change_rad = fu::yawChangeFromImageMotion_rad(pixel_matrix, k, mount.base_from_camera);
-    q0 = levelAttitude(*operator_heading_rad_);
-    q1 = levelAttitude(*operator_heading_rad_ + yaw_change_rad);
+  const fu::InputOutcome outcome = front_end_->addImageMotion(motion);
+  if (!outcome.started_from.empty()) onStarted(outcome.started_from);
+  if (!outcome.rejected.empty()) rejectInput("image motion", outcome.rejected);
+  if (!outcome.problem.empty()) {
+    last_problem_ = outcome.problem;
+    ROS_WARN_THROTTLE(5.0, "fusion: %s", outcome.problem.c_str());
   }
-  if (!q0 || !q1) {
-    last_problem_ = "no attitude at the image stamps (IMU, navigation orientation or ~initial_heading_deg)";
-    ROS_WARN_THROTTLE(5.0, "fusion: %s", last_problem_.c_str());
-    fail("", "");
-    return;
-  }
-  const auto h0 = cameraHeightAt(t0, *q0, mount.base_from_camera), h1 = cameraHeightAt(t1, *q1, mount.base_from_camera);
-  if (!h0 || !h1) {
-    last_problem_ = "no camera height at the image stamps (altimeter or ~initial_altitude_m)";
-    ROS_WARN_THROTTLE(5.0, "fusion: %s", last_problem_.c_str());
-    fail("", "");
-    return;
-  }
-  const Eigen::Vector2d centre(msg.centre_px[0], msg.centre_px[1]);
-  const fu::MetricMotion metric =
-      fu::toMetricMotion(model, parameters, covariance, centre, mount, {*q0, *h0}, {*q1, *h1});
-  if (!metric.valid) {
-    fail("image motion", metric.error);
-    return;
-  }
-  if (operator_heading_rad_ && yaw_change_rad != 0.0) *operator_heading_rad_ += yaw_change_rad;
-  const fu::UpdateResult result = filter_.addImageMotion(t0, t1, metric);
-  countResult("image motion", result);
-  if (image_only_en_m_) {
-    *image_only_en_m_ += metric.camera_displacement_en_m;
-    appendPath(&image_path_, msg.header.stamp, *image_only_en_m_);
-  }
+  if (!outcome.update) return;  // refused before the filter
+  const bool waiting = outcome.update->status == fu::UpdateStatus::kNotInitialized;
+  // A pair without a metric motion reaches the filter as an image failure: its time passes, its covariance grows.
+  if (!outcome.metric && !waiting) ++motion_failures_;
+  countResult(outcome.metric || waiting ? "image motion" : "image failure", *outcome.update);
+  if (waiting) return;
+  if (outcome.metric && outcome.camera_en_m) appendPath(&image_path_, msg.header.stamp, *outcome.camera_en_m);
   publishState(msg.header.stamp);
+}
+
+void FusionRos::handleOutcome(const std::string& kind, const fu::InputOutcome& outcome) {
+  if (!outcome.started_from.empty()) onStarted(outcome.started_from);
+  if (!outcome.rejected.empty()) rejectInput(kind, outcome.rejected);
+  if (!outcome.problem.empty()) {
+    last_problem_ = outcome.problem;
+    ROS_WARN_THROTTLE(5.0, "fusion: %s", outcome.problem.c_str());
+  }
+  if (outcome.update) countResult(kind, *outcome.update);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -681,11 +571,11 @@ void FusionRos::appendPath(nav_msgs::Path* path, const ros::Time& stamp, const E
 
 void FusionRos::publishState(const ros::Time& stamp) {
   // When the images stop the navigation carries the track, and its stamps can be an image's already published.
-  if (!filter_.initialized() || stamp == last_published_stamp_) return;
+  if (!front_end_->filter().initialized() || stamp == last_published_stamp_) return;
   last_published_stamp_ = stamp;
-  const fu::FilterState s = filter_.current();
-  const auto attitude = attitudeAt(stamp.toSec());
-  const auto camera = mountOf(camera_frame_.empty() ? config_.camera_frame : camera_frame_);
+  const fu::FilterState s = front_end_->filter().current();
+  const auto attitude = front_end_->attitudeAt(stamp.toSec());
+  const auto camera = front_end_->cameraMount();
 
   nav_msgs::Odometry odometry;
   odometry.header.stamp = stamp;
@@ -711,10 +601,10 @@ void FusionRos::publishState(const ros::Time& stamp) {
   appendPath(&fused_path_, stamp, s.position_en_m);
   publishDatum();
   if (camera_height_pub_ && attitude && camera) {
-    if (const auto height_m = cameraHeightAt(stamp.toSec(), *attitude, *camera)) {
+    if (const auto height_m = front_end_->cameraHeightAt(stamp.toSec(), *attitude, *camera)) {
       sensor_msgs::Range range;
       range.header.stamp = stamp;
-      range.header.frame_id = camera_frame_.empty() ? config_.camera_frame : camera_frame_;
+      range.header.frame_id = front_end_->cameraFrame();
       range.radiation_type = sensor_msgs::Range::ULTRASOUND;
       range.min_range = 0.0f;
       range.max_range = 1000.0f;
@@ -777,7 +667,7 @@ bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Respons
     response.message = "~keep_smoother_log is false: the dive was not kept for smoothing";
     return true;
   }
-  const std::vector<fu::FilterState> smoothed = fu::smoothRts(filter_.log());
+  const std::vector<fu::FilterState> smoothed = fu::smoothRts(front_end_->filter().log());
   if (smoothed.empty()) {
     response.success = false;
     response.message = "nothing to smooth yet";
@@ -818,11 +708,11 @@ void FusionRos::writeTracks() {
   }
   try {
     std::vector<fu::FilterState> filtered;
-    for (const fu::FilterStep& step : filter_.log().steps)
+    for (const fu::FilterStep& step : front_end_->filter().log().steps)
       filtered.push_back(fu::FilterState::from(step.stamp_s, step.x_posterior, step.P_posterior));
     if (!config_.track_csv.empty()) sim::writeFileAtomically(config_.track_csv, trackCsv(filtered));
     if (!config_.smoothed_track_csv.empty())
-      sim::writeFileAtomically(config_.smoothed_track_csv, trackCsv(fu::smoothRts(filter_.log())));
+      sim::writeFileAtomically(config_.smoothed_track_csv, trackCsv(fu::smoothRts(front_end_->filter().log())));
     ROS_INFO("fusion: wrote %zu states to %s %s", filtered.size(), config_.track_csv.c_str(),
              config_.smoothed_track_csv.c_str());
   } catch (const std::exception& e) {
@@ -831,10 +721,10 @@ void FusionRos::writeTracks() {
 }
 
 void FusionRos::onReconfigure(exocet_mosaic::FusionConfig& c, uint32_t) {
-  const fusion::FilterConfig& now = filter_.config();
+  const fusion::FilterConfig now = front_end_->filter().config();
   if (c.gate_probability == now.gate_probability && c.recovery_rejections == now.recovery_rejections) return;
   try {
-    filter_.setGating(c.gate_probability, c.recovery_rejections);
+    front_end_->filter().setGating(c.gate_probability, c.recovery_rejections);
   } catch (const std::invalid_argument& e) {
     ROS_ERROR("fusion: reconfiguration refused, keeping the gate in force: %s", e.what());
     c.gate_probability = now.gate_probability;
@@ -844,7 +734,7 @@ void FusionRos::onReconfigure(exocet_mosaic::FusionConfig& c, uint32_t) {
   config_.filter.gate_probability = c.gate_probability;
   config_.filter.recovery_rejections = c.recovery_rejections;
   ROS_INFO("fusion: reconfigured: gate probability %.9g (Mahalanobis^2 <= %.1f), recovery after %d rejections",
-           c.gate_probability, filter_.config().gateThreshold(), c.recovery_rejections);
+           c.gate_probability, front_end_->filter().config().gateThreshold(), c.recovery_rejections);
 }
 
 void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
@@ -853,11 +743,11 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     for (const auto& kv : m) n += kv.second;
     return n;
   };
-  status.add("initialised", filter_.initialized());
+  status.add("initialised", front_end_->filter().initialized());
   status.add("utm zone", grid_ ? grid_->name() + " (EPSG " + std::to_string(grid_->epsg()) + ") from " + grid_source_
                                : std::string("unknown"));
-  status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", filter_.config().gate_probability,
-              filter_.config().gateThreshold());
+  status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", front_end_->filter().config().gate_probability,
+              front_end_->filter().config().gateThreshold());
   status.add("image motions", motions_);
   status.add("images awaiting their motion", awaiting_motion_.size());
   status.add("motion waits timed out", motion_waits_timed_out_);
@@ -870,12 +760,12 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
   status.add("last problem", last_problem_);
-  if (!filter_.initialized()) {
+  if (!front_end_->filter().initialized()) {
     status.summary(DiagnosticStatus::WARN,
                    "waiting for a first position (navigation, ~initial_* or ~set_initial_pose)");
     return;
   }
-  const fu::FilterState s = filter_.current();
+  const fu::FilterState s = front_end_->filter().current();
   const double sigma_m = std::sqrt(std::max(s.position_covariance_m2(0, 0), s.position_covariance_m2(1, 1)));
   status.add("position sigma (m)", sigma_m);
   status.add("pixel size correction", s.pixel_size_correction);

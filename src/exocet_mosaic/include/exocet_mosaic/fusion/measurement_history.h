@@ -8,6 +8,7 @@
 #include <deque>
 #include <optional>
 #include <utility>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -27,6 +28,10 @@ class AttitudeHistory {
   /// The attitude at `stamp_s`: interpolated between the samples around it, or the nearest sample when it lies
   /// within `max_interpolation_gap_s` / 2 outside the covered interval; empty otherwise.
   std::optional<Eigen::Quaterniond> at(double stamp_s) const;
+  /// The samples stamped in [from_s, to_s], oldest first.
+  std::vector<std::pair<double, Eigen::Quaterniond>> between(double from_s, double to_s) const;
+  /// Stamp of the newest sample; empty when there is none.
+  std::optional<double> newestStamp() const;
   bool empty() const { return samples_.empty(); }
   void clear() { samples_.clear(); }
 
@@ -42,6 +47,8 @@ class ScalarHistory {
       : window_s_(window_s), max_gap_s_(max_interpolation_gap_s) {}
   void add(double stamp_s, double value);
   std::optional<double> at(double stamp_s) const;
+  /// The samples stamped in [from_s, to_s], oldest first.
+  std::vector<std::pair<double, double>> between(double from_s, double to_s) const;
   bool empty() const { return samples_.empty(); }
   void clear() { samples_.clear(); }
 

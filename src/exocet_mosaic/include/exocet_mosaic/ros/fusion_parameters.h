@@ -51,6 +51,10 @@ struct FusionNodeConfig {
   double clock_jump_s = 10.0;       ///< a stamp older than the newest by more than this resets everything (0, 1e6]
   double attitude_max_gap_s = 0.5;  ///< attitude samples further apart are not interpolated (0, 60]
   double altitude_max_gap_s = 2.0;  ///< altimeter samples further apart are not interpolated (0, 600]
+  /// Roll, pitch and altimeter range fitted over +-this window at each image's stamp (their white noise averaged);
+  /// 0: interpolated. Set ~reorder_delay_s at least as long, so that the window's samples have arrived [0, 10] s.
+  double view_half_window_s = 0.0;
+  double altimeter_sigma_m = 0.0;  ///< one altimeter range's 1-sigma (datasheet), 0 = taken as exact [0, 10] m
 
   // No navigation: the operator's first point (NaN = not given); also settable through ~set_initial_pose.
   double initial_latitude_deg = NAN, initial_longitude_deg = NAN;

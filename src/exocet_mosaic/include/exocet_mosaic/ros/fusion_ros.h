@@ -32,16 +32,16 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
-#include "exocet_mosaic/fusion/measurement_history.h"
-#include "exocet_mosaic/fusion/metric_motion.h"
-#include "exocet_mosaic/fusion/navigation_filter.h"
+#include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/fusion/utm_grid.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
 namespace exocet_mosaic {
 
 /**
- * @brief Fuses the registration's image motion with the vehicle's navigation (2D3 report, section 3.5).
+ * @brief Fuses the registration's image motion with the vehicle's navigation (2D3 report, section 3.5): converts the
+ * messages and hands them, in stamp order, to a fusion::FusionFrontEnd (attitude and height lookup, metric
+ * conversion, the filter's start), then publishes its state.
  *
  * Inputs are processed in arrival order; USBL fixes, stamped at measurement and arriving late, are out-of-sequence
  * measurements the filter handles from its history. Navigation in latitude/longitude (NavSatFix) or UTM
@@ -93,18 +93,14 @@ class FusionRos {
   void rejectInput(const std::string& kind, const std::string& why);
   void countResult(const std::string& kind, const fusion::UpdateResult& result);
 
-  /// Attitude (world from base_link) at a stamp: the IMU's, else the navigation's, else the operator heading carried
-  /// on by the images (level vehicle). Empty when none is known.
-  std::optional<Eigen::Quaterniond> attitudeAt(double stamp_s) const;
-  /// Camera height above the seabed at a stamp: the altimeter's (lever arms and attitude included), else the
-  /// operator's; empty when none is known.
-  std::optional<double> cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
-                                       const Eigen::Isometry3d& base_from_camera);
+  /// Counts and logs what became of an input the front-end took; publishes where the input calls for it.
+  void handleOutcome(const std::string& kind, const fusion::InputOutcome& outcome);
   /// base_link -> frame from tf (static mounts); empty, with a throttled warning, when tf does not have it.
   std::optional<Eigen::Isometry3d> mountOf(const std::string& frame);
   /// The UTM grid of the dive, choosing it from a latitude/longitude when nothing fixed it yet.
   const fusion::UtmGrid* gridFor(double latitude_deg, double longitude_deg);
-  void initializeFilter(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m, const std::string& source);
+  /// The filter has just started (from `source`): the map origin and a log line.
+  void onStarted(const std::string& source);
   void initializeFromParameters();
 
   // Outputs.
@@ -120,7 +116,7 @@ class FusionRos {
 
   ros::NodeHandle nh_, private_nh_;
   FusionNodeConfig config_;
-  fusion::NavigationFilter filter_;
+  std::unique_ptr<fusion::FusionFrontEnd> front_end_;
   // The operator's knobs (gating). Node and nodelet run the callbacks on one thread (ST node handles).
   std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
@@ -144,17 +140,8 @@ class FusionRos {
   std::string grid_source_;
   std::optional<Eigen::Vector2d> map_origin_en_m_;  ///< utm -> map offset (rviz cannot draw UTM-sized floats)
 
-  // Attitude, altitude and camera.
-  fusion::AttitudeHistory imu_attitude_, nav_attitude_;
-  fusion::ScalarHistory altimeter_range_m_;
-  std::string altimeter_frame_;
-  std::optional<Eigen::Matrix3d> camera_info_matrix_;
+  // Mounts on the vehicle, looked up once each from tf.
   std::map<std::string, Eigen::Isometry3d> mounts_;
-  std::optional<double> operator_heading_rad_;  ///< ENU yaw carried by the images when no attitude sensor speaks
-  std::optional<double> operator_height_m_;
-  std::string camera_frame_;                             ///< the motion messages' frame (the camera's optical frame)
-  std::optional<Eigen::Vector2d> pending_initial_en_m_;  ///< operator's first point, applied at the next input
-  double pending_initial_sigma_m_ = 1.0;
   std::multimap<double, std::function<void()>> queue_;
   std::map<double, ros::SteadyTime> awaiting_motion_;  ///< image stamps (camera_info) whose motion has not arrived
   bool motion_seen_ = false;                           ///< the registration runs: images wait for their motion
@@ -167,8 +154,6 @@ class FusionRos {
   // Tracks.
   double newest_stamp_s_ = 0.0;
   bool have_stamp_ = false;
-  std::optional<Eigen::Vector2d> image_only_en_m_;
-  std::optional<Eigen::Vector2d> last_dr_camera_en_m_;
   nav_msgs::Path fused_path_, nav_path_, image_path_;
   ros::Time last_odometry_stamp_;
 
