@@ -1,9 +1,10 @@
 // Benchmark of the navigation fusion (2D3 sections 3.3 and 3.5): the report's out-and-back experiment (figure 5) on
 // a simulated dive with ground truth. The simulator runs in-process (frames, navigation and truth captured from its
-// sink, cached on disk under --output-dir/cache); consecutive frames are registered (homography, method auto),
-// converted to metres (attitude from the IMU, height from the altimeter, the rig's camera), and fed with the dead
-// reckoning and the late USBL fixes, in arrival order, to the navigation filter; the RTS smoother runs over the whole
-// dive. Every track is scored against the true camera centre. Writes fusion.json.
+// sink, cached on disk under --output-dir/cache); consecutive frames are registered through registration_node's
+// front-end (SequenceRegistrar: homography, method auto), and every sensor's records are fed, in arrival order, to
+// fusion_node's front-end (FusionFrontEnd: attitude and altimeter histories, roll, pitch and range fitted over +-1 s
+// at each image, metric conversion with the rig's camera, lever arms) and its navigation filter; the RTS smoother
+// runs over the whole dive. Every track is scored against the true camera centre. Writes fusion.json.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -15,6 +16,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -26,12 +28,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_mosaic/fusion/cross_pass_smoother.h"
+#include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/fusion/metric_motion.h"
 #include "exocet_mosaic/fusion/navigation_filter.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
 #include "exocet_mosaic/fusion/utm_grid.h"
 #include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/motion_model.h"
+#include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 #include "exocet_mosaic/sim/navigation_sensors.h"
@@ -199,61 +203,6 @@ Eigen::Quaterniond attitudeAt(const std::vector<sim::ImuRecord>& imu, double sta
   return prev->orientation.slerp(f, it->orientation);
 }
 
-/// Value at t = 0 of the quadratic fitted to (t_i, y_i), and the variance factor of that value (times the
-/// samples' variance).
-std::pair<double, double> quadraticAtZero(const std::vector<double>& t, const std::vector<double>& y) {
-  const int n = static_cast<int>(t.size());
-  const int degree = n >= 5 ? 2 : (n >= 2 ? 1 : 0);
-  Eigen::MatrixXd A(n, degree + 1);
-  Eigen::VectorXd b(n);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j <= degree; ++j) A(i, j) = std::pow(t[i], j);
-    b[i] = y[i];
-  }
-  const Eigen::MatrixXd AtA_inv = (A.transpose() * A).inverse();
-  const Eigen::VectorXd c = AtA_inv * A.transpose() * b;
-  return {c[0], AtA_inv(0, 0)};
-}
-
-/// Attitude at a stamp with roll and pitch smoothed by a quadratic fitted over +-half_window_s of IMU records: their
-/// noise is white (gravity-referenced), and a single record's noise (2 mrad) is 5 mm on the seabed at 2.5 m. The
-/// heading (gyro-integrated, smooth) is the record's own. A centred window: the attitude of an image is known
-/// half_window_s after its stamp.
-Eigen::Quaterniond smoothedAttitude(const std::vector<sim::ImuRecord>& imu, double stamp_s, double half_window_s) {
-  const Eigen::Vector3d at = sim::rpyFromRotation(attitudeAt(imu, stamp_s).toRotationMatrix());
-  auto it = std::lower_bound(imu.begin(), imu.end(), stamp_s - half_window_s - 1e-9,
-                             [](const sim::ImuRecord& r, double t) { return r.stamp_s < t; });
-  std::vector<double> t, roll, pitch;
-  for (; it != imu.end() && it->stamp_s <= stamp_s + half_window_s + 1e-9; ++it) {
-    const Eigen::Vector3d rpy = sim::rpyFromRotation(it->orientation.toRotationMatrix());
-    t.push_back(it->stamp_s - stamp_s);
-    roll.push_back(rpy.x());
-    pitch.push_back(rpy.y());
-  }
-  if (t.empty()) return attitudeAt(imu, stamp_s);
-  return Eigen::Quaterniond(
-      sim::rotationFromRpy(quadraticAtZero(t, roll).first, quadraticAtZero(t, pitch).first, at.z()));
-}
-
-/// Altimeter range at a stamp, a quadratic fitted over +-half_window_s of records (the white noise averaged), with
-/// its 1-sigma from the records' sigma; NaN when no finite record is near.
-std::pair<double, double> smoothedRange(const std::vector<sim::AltitudeRecord>& altitude, double stamp_s,
-                                        double half_window_s) {
-  auto it = std::lower_bound(altitude.begin(), altitude.end(), stamp_s - half_window_s - 1e-9,
-                             [](const sim::AltitudeRecord& r, double t) { return r.stamp_s < t; });
-  std::vector<double> t, range;
-  double sigma = 0.0;
-  for (; it != altitude.end() && it->stamp_s <= stamp_s + half_window_s + 1e-9; ++it) {
-    if (!std::isfinite(it->range_m)) continue;
-    t.push_back(it->stamp_s - stamp_s);
-    range.push_back(it->range_m);
-    sigma = it->sigma_m;
-  }
-  if (t.empty()) return {std::nan(""), std::nan("")};
-  const auto [value, factor] = quadraticAtZero(t, range);
-  return {value, sigma * std::sqrt(factor)};
-}
-
 // ---- Scores -------------------------------------------------------------------------------------------------------
 
 double rmse(const std::vector<Eigen::Vector2d>& estimate, const std::vector<Eigen::Vector2d>& truth,
@@ -380,18 +329,81 @@ CrossRegistration registerAcrossPasses(const SiftFeatures& a, const SiftFeatures
   return r;
 }
 
-// ---- Filter runs ----------------------------------------------------------------------------------------------------
+// ---- Filter runs: the sensors through the node's front-end ------------------------------------------------------
 
+/// Half-width of the window over which the front-end fits roll, pitch and the altimeter range at each image
+/// (fusion_node's ~view_half_window_s): an image's motion reaches the filter that long after its stamp.
+constexpr double kViewHalfWindow_s = 1.0;
+/// Frames of the simulated rig, as fusion_node finds them in tf.
+const char* const kCameraFrame = "camera";
+const char* const kAltimeterFrame = "altimeter";
+
+/// One input of the fusion, as it arrives: what fusion_node gets from its topics.
 struct NavEvent {
-  enum Kind { kImage, kImageFailure, kDeadReckoning, kFix } kind = kImage;
+  enum Kind { kImage, kDeadReckoning, kFix, kAttitude, kAltitude } kind = kImage;
   double arrival_s = 0.0;
   double stamp_s = 0.0;
-  double previous_stamp_s = 0.0;
-  int frame = -1;  ///< images: the current frame's index
-  fusion::MetricMotion motion;
-  Eigen::Vector2d value = Eigen::Vector2d::Zero();
+  int frame = -1;                                     ///< images: the current frame's index
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();  ///< dead reckoning, fixes: base_link in the UTM grid
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  ///< dead reckoning, attitude: world from base
+  double range_m = 0.0;                                               ///< altimeter
   Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity();
 };
+
+/// Every input of one realisation of the sensors, in arrival order. The image motion of frame k arrives once its
+/// view's window has passed (plus the registration's time).
+std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& grid) {
+  std::vector<NavEvent> events;
+  const double t0 = d.frame_stamps_s.front();
+  const double image_latency_s = kViewHalfWindow_s + 0.03;
+  for (size_t k = 1; k < d.frame_stamps_s.size(); ++k) {
+    NavEvent e;
+    e.kind = NavEvent::kImage;
+    e.stamp_s = d.frame_stamps_s[k];
+    e.arrival_s = e.stamp_s + image_latency_s;
+    e.frame = static_cast<int>(k);
+    events.push_back(e);
+  }
+  for (const sim::ImuRecord& r : d.imu) {
+    NavEvent e;
+    e.kind = NavEvent::kAttitude;
+    e.stamp_s = e.arrival_s = r.stamp_s;
+    e.orientation = r.orientation;
+    events.push_back(e);
+  }
+  for (const sim::AltitudeRecord& r : d.altitude) {
+    if (!std::isfinite(r.range_m) || r.range_m <= 0.0) continue;  // fusion_node rejects these
+    NavEvent e;
+    e.kind = NavEvent::kAltitude;
+    e.stamp_s = e.arrival_s = r.stamp_s;
+    e.range_m = r.range_m;
+    events.push_back(e);
+  }
+  for (const sim::PoseRecord& r : d.dead_reckoning) {
+    if (r.stamp_s < t0) continue;
+    NavEvent e;
+    e.kind = NavEvent::kDeadReckoning;
+    e.stamp_s = e.arrival_s = r.stamp_s;
+    e.position_m = r.position_m;
+    e.orientation = r.orientation;
+    e.covariance = r.pose_covariance.block<2, 2>(0, 0);
+    events.push_back(e);
+  }
+  for (const sim::FixRecord& f : d.usbl) {
+    if (f.stamp_s <= t0) continue;
+    NavEvent e;
+    e.kind = NavEvent::kFix;
+    e.stamp_s = f.stamp_s;
+    e.arrival_s = f.arrival_s;
+    const Eigen::Vector2d base_en = grid.toGrid(f.latitude_deg, f.longitude_deg);
+    e.position_m = Eigen::Vector3d(base_en.x(), base_en.y(), f.altitude_m);
+    e.covariance = f.horizontal_sigma_m * f.horizontal_sigma_m * Eigen::Matrix2d::Identity();
+    events.push_back(e);
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const NavEvent& a, const NavEvent& b) { return a.arrival_s < b.arrival_s; });
+  return events;
+}
 
 struct FilterRun {
   std::vector<Eigen::Vector2d> filtered;  ///< at each frame, from the final log (each fix at its own stamp)
@@ -401,6 +413,10 @@ struct FilterRun {
   std::vector<Eigen::Matrix2d> smoothed_covariance;
   std::vector<int> frame_step;            ///< index of each frame's step in the log (-1: none)
   std::vector<fusion::FilterState> smoothed_states;
+  std::vector<fusion::MetricMotion> motions;  ///< the front-end's metric motion of each pair (invalid: none)
+  std::vector<std::optional<fusion::ViewGeometry>> views;  ///< the front-end's view of each frame
+  std::map<double, Eigen::Vector2d> dr_at;  ///< dead-reckoning camera centre by stamp, as the front-end placed it
+  std::vector<fusion::AbsoluteConstraint> fixes;  ///< the fixes moved to the camera, as the front-end gave them
   int events = 0;
   double filter_seconds = 0.0, smoother_seconds = 0.0;
   int fixes_rejected_at_arrival = 0, fixes_rejected_final = 0, fixes_applied_final = 0, recoveries = 0;
@@ -409,15 +425,39 @@ struct FilterRun {
   fusion::FilterLog log;
 };
 
-FilterRun runFilter(const fusion::FilterConfig& config, const std::vector<NavEvent>& events, bool images, bool nav,
-                    double t0_s, const Eigen::Vector2d& p0, const Eigen::Matrix2d& P0,
+/// The front-end as fusion_node configures it from its parameters, for these sensors and this filter.
+fusion::FusionFrontEndConfig frontEndConfig(const fusion::FilterConfig& filter, const sim::NavigationSensorConfig& nav) {
+  fusion::FusionFrontEndConfig c;
+  c.filter = filter;
+  c.keep_log = true;
+  c.view_half_window_s = kViewHalfWindow_s;
+  c.altimeter_sigma_m = nav.altimeter_noise_m;
+  c.default_camera_frame = kCameraFrame;
+  return c;
+}
+
+/// Feeds `events` through a FusionFrontEnd, the object fusion_node runs: attitude and altimeter into its histories,
+/// each pair's registration estimate (`estimates`, with the intrinsics `camera_matrix`) converted by it, dead
+/// reckoning and fixes moved to the camera by it. `images` / `nav` select the sources; the attitude and the altimeter
+/// always speak. The filter starts, as in the node, from the first dead reckoning.
+FilterRun runFilter(const fusion::FusionFrontEndConfig& config, const sim::CameraRig& rig,
+                    const Eigen::Matrix3d& camera_matrix, const std::vector<registration::MotionEstimate>& estimates,
+                    const std::vector<NavEvent>& events, bool images, bool nav,
                     const std::vector<double>& frame_stamps) {
   FilterRun run;
   const size_t n = frame_stamps.size();
   const Eigen::Vector2d nan2(std::nan(""), std::nan(""));
   run.live.assign(n, nan2);
-  fusion::NavigationFilter filter(config);
-  filter.initialize(t0_s, p0, P0);
+  run.motions.assign(n, fusion::MetricMotion());
+  run.views.assign(n, std::nullopt);
+  const Eigen::Isometry3d base_from_camera = rig.baseFromCamera();
+  fusion::FusionFrontEnd front(config, [&](const std::string& frame) -> std::optional<Eigen::Isometry3d> {
+    if (frame == kCameraFrame) return base_from_camera;
+    if (frame == kAltimeterFrame) return Eigen::Isometry3d::Identity();  // the simulator's altimeter sits at base_link
+    return std::nullopt;
+  });
+  front.setCameraMatrix(camera_matrix);
+  const fusion::NavigationFilter& filter = front.filter();
   const auto step_at = [&](double stamp) -> const fusion::FilterStep* {
     const auto& steps = filter.log().steps;
     auto it = std::lower_bound(steps.begin(), steps.end(), stamp,
@@ -426,24 +466,54 @@ FilterRun runFilter(const fusion::FilterConfig& config, const std::vector<NavEve
   };
   const auto start = Clock::now();
   for (const NavEvent& e : events) {
-    fusion::UpdateResult r;
-    if (e.kind == NavEvent::kImage || e.kind == NavEvent::kImageFailure) {
-      if (!images) continue;
-      r = e.kind == NavEvent::kImage ? filter.addImageMotion(e.previous_stamp_s, e.stamp_s, e.motion)
-                                     : filter.addImageFailure(e.previous_stamp_s, e.stamp_s);
-      if (const fusion::FilterStep* s = step_at(e.stamp_s)) run.live[e.frame] = s->x_posterior.head<2>();
-    } else if (e.kind == NavEvent::kDeadReckoning) {
-      if (!nav) continue;
-      r = filter.addDeadReckoning(e.stamp_s, e.value, e.covariance);
-    } else {
-      if (!nav) continue;
-      r = filter.addAbsoluteFix(e.stamp_s, e.value, e.covariance);
-      run.fixes_rejected_at_arrival += r.status == fusion::UpdateStatus::kRejectedByGate;
+    fusion::InputOutcome outcome;
+    switch (e.kind) {
+      case NavEvent::kAttitude:
+        front.addImuAttitude(e.stamp_s, e.orientation);
+        continue;
+      case NavEvent::kAltitude:
+        front.addAltimeterRange(e.stamp_s, e.range_m, kAltimeterFrame);
+        continue;
+      case NavEvent::kImage: {
+        if (!images) continue;
+        const registration::MotionEstimate& estimate = estimates[e.frame];
+        fusion::ImageMotionInput input;
+        input.previous_stamp_s = frame_stamps[e.frame - 1];
+        input.stamp_s = e.stamp_s;
+        input.failed = estimate.failed;
+        input.model = registration::toString(estimate.model);
+        input.parameters = estimate.parameters;
+        input.covariance = estimate.covariance;
+        input.centre_px = estimate.centre_px;
+        input.pixel_matrix = estimate.pixel_matrix;
+        input.camera_matrix = camera_matrix;
+        outcome = front.addImageMotion(input);
+        if (outcome.metric) run.motions[e.frame] = *outcome.metric;
+        if (!run.views[e.frame - 1]) run.views[e.frame - 1] = front.viewAt(input.previous_stamp_s, base_from_camera);
+        run.views[e.frame] = front.viewAt(e.stamp_s, base_from_camera);
+        if (const fusion::FilterStep* s = step_at(e.stamp_s)) run.live[e.frame] = s->x_posterior.head<2>();
+        break;
+      }
+      case NavEvent::kDeadReckoning:
+        front.addNavigationAttitude(e.stamp_s, e.orientation);
+        if (!nav) continue;
+        outcome = front.addDeadReckoning(e.stamp_s, e.position_m, e.covariance);
+        if (outcome.camera_en_m) run.dr_at[e.stamp_s] = *outcome.camera_en_m;
+        break;
+      case NavEvent::kFix:
+        if (!nav) continue;
+        outcome = front.addFix(e.stamp_s, e.position_m.head<2>(), e.covariance, "", false);
+        if (outcome.camera_en_m) run.fixes.push_back({e.stamp_s, *outcome.camera_en_m, e.covariance});
+        if (outcome.update) run.fixes_rejected_at_arrival += outcome.update->status == fusion::UpdateStatus::kRejectedByGate;
+        break;
     }
     ++run.events;
-    if (r.status == fusion::UpdateStatus::kInvalid || r.status == fusion::UpdateStatus::kNotInitialized)
+    if (!outcome.rejected.empty() || !outcome.problem.empty())
       std::cout << "  event at " << std::fixed << std::setprecision(3) << e.stamp_s << std::defaultfloat << ": "
-                << fusion::toString(r.status) << " " << r.detail << "\n";
+                << outcome.rejected << outcome.problem << "\n";
+    else if (outcome.update && outcome.update->status == fusion::UpdateStatus::kInvalid)
+      std::cout << "  event at " << std::fixed << std::setprecision(3) << e.stamp_s << std::defaultfloat << ": "
+                << fusion::toString(outcome.update->status) << " " << outcome.update->detail << "\n";
   }
   run.filter_seconds = secondsSince(start);
   const auto smoother_start = Clock::now();
@@ -475,126 +545,75 @@ FilterRun runFilter(const fusion::FilterConfig& config, const std::vector<NavEve
   return run;
 }
 
-/// Everything the filter is fed from one realisation of the navigation sensors: the views (attitude and height at
-/// each image), the image motions in metres, and the events of every source in arrival order.
-struct Sources {
-  std::vector<fusion::ViewGeometry> views;
-  std::vector<fusion::MetricMotion> motions;
-  double metric_step_rmse_m = 0.0;
-  double metric_step_reported_rms_m = 0.0;  ///< sqrt of the mean trace of the motions' covariances
-  int metric_count = 0;
-  std::vector<NavEvent> events;
-  std::map<double, Eigen::Vector2d> dr_at;  ///< DR camera centre by stamp
-  std::vector<double> usbl_errors;          ///< fixes at frame stamps, against the truth (m)
-  double metric_step_along_sq_m2 = 0.0, metric_step_cross_sq_m2 = 0.0;  ///< sums of squared step errors per axis
-  double metric_step_along_reported_m2 = 0.0, metric_step_cross_reported_m2 = 0.0;  ///< sums of reported variances
-  int metric_step_axis_count = 0;
-  int usbl_outliers = 0;                    ///< fixes off by more than 4 sigma
+/// How far the front-end's metric motions are from the truth, overall and along / across each step's motion.
+struct MetricStats {
+  double step_rmse_m = 0.0;
+  double step_reported_rms_m = 0.0;  ///< sqrt of the mean trace of the motions' covariances
+  int count = 0;
+  double along_sq_m2 = 0.0, cross_sq_m2 = 0.0;              ///< sums of squared step errors per axis
+  double along_reported_m2 = 0.0, cross_reported_m2 = 0.0;  ///< sums of reported variances
+  int axis_count = 0;
 };
 
-Sources buildSources(const CapturedDive& d, const std::vector<registration::MotionEstimate>& estimates,
-                     const fusion::CameraMount& mount, const fusion::UtmGrid& grid,
-                     const std::vector<Eigen::Vector2d>& truth, const Eigen::Vector3d& lever_arm_m,
-                     double usbl_sigma) {
-  Sources src;
-  const size_t n = d.gray.size();
-  const double t0 = d.frame_stamps_s.front();
-  const Eigen::Vector3d altimeter_in_base = Eigen::Vector3d::Zero();  // the simulator's altimeter sits at base_link
-  // Roll, pitch and altimeter range smoothed over +-1 s around each image (their noise is white): an image's view
-  // is known 1 s after its stamp, so its motion reaches the filter then (the filter re-processes the DR it has
-  // received in between).
-  const double view_window_s = 1.0;
-  std::vector<fusion::ViewGeometry>& views = src.views;
-  views.resize(n);
-  for (size_t k = 0; k < n; ++k) {
-    views[k].world_from_base = smoothedAttitude(d.imu, d.frame_stamps_s[k], view_window_s);
-    const auto [range, range_sigma] = smoothedRange(d.altitude, d.frame_stamps_s[k], view_window_s);
-    views[k].camera_height_m = fusion::cameraHeightFromAltimeter_m(range, views[k].world_from_base, altimeter_in_base,
-                                                                   lever_arm_m);
-    views[k].camera_height_sigma_m = range_sigma;
-  }
-  std::vector<fusion::MetricMotion>& motions = src.motions;
-  motions.resize(n);
-  double metric_error_sum = 0.0;
-  int metric_count = 0;
-  for (size_t k = 1; k < n; ++k) {
-    const registration::MotionEstimate& e = estimates[k];
-    if (e.failed) continue;
-    motions[k] = fusion::toMetricMotion(e.model, e.parameters, e.covariance, e.centre_px, mount, views[k - 1], views[k]);
-    if (!motions[k].valid) {
-      std::cout << "  metric conversion of pair " << k << " failed: " << motions[k].error << "\n";
-      continue;
-    }
+MetricStats metricStats(const std::vector<fusion::MetricMotion>& motions, const std::vector<Eigen::Vector2d>& truth) {
+  MetricStats m;
+  double error_sum = 0.0;
+  for (size_t k = 1; k < motions.size(); ++k) {
+    if (!motions[k].valid) continue;
     const Eigen::Vector2d true_step = truth[k] - truth[k - 1];
     const Eigen::Vector2d step_error = motions[k].camera_displacement_en_m - true_step;
-    metric_error_sum += step_error.squaredNorm();
+    error_sum += step_error.squaredNorm();
     if (true_step.norm() > 1e-6) {  // along and across the step's motion: is the registration's error isotropic?
       const Eigen::Vector2d along = true_step.normalized();
-      src.metric_step_along_sq_m2 += std::pow(along.dot(step_error), 2);
-      src.metric_step_cross_sq_m2 += std::pow(along.x() * step_error.y() - along.y() * step_error.x(), 2);
+      m.along_sq_m2 += std::pow(along.dot(step_error), 2);
+      m.cross_sq_m2 += std::pow(along.x() * step_error.y() - along.y() * step_error.x(), 2);
       const Eigen::Vector2d cross(-along.y(), along.x());
-      src.metric_step_along_reported_m2 += along.dot(motions[k].covariance_m2 * along);
-      src.metric_step_cross_reported_m2 += cross.dot(motions[k].covariance_m2 * cross);
-      ++src.metric_step_axis_count;
+      m.along_reported_m2 += along.dot(motions[k].covariance_m2 * along);
+      m.cross_reported_m2 += cross.dot(motions[k].covariance_m2 * cross);
+      ++m.axis_count;
     }
-    src.metric_step_reported_rms_m += motions[k].covariance_m2.trace();
-    ++metric_count;
+    m.step_reported_rms_m += motions[k].covariance_m2.trace();
+    ++m.count;
   }
-  src.metric_step_rmse_m = std::sqrt(metric_error_sum / std::max(1, metric_count));
-  src.metric_count = metric_count;
-  src.metric_step_reported_rms_m = std::sqrt(src.metric_step_reported_rms_m / std::max(1, metric_count));
+  m.step_rmse_m = std::sqrt(error_sum / std::max(1, m.count));
+  m.step_reported_rms_m = std::sqrt(m.step_reported_rms_m / std::max(1, m.count));
+  return m;
+}
 
-  // ---- 4. Sources, in arrival order ----
-  std::vector<NavEvent>& events = src.events;
-  const double image_latency_s = view_window_s + 0.03;  // the views' window, then the registration
-  for (size_t k = 1; k < n; ++k) {
-    NavEvent e;
-    e.kind = motions[k].valid ? NavEvent::kImage : NavEvent::kImageFailure;
-    e.stamp_s = d.frame_stamps_s[k];
-    e.previous_stamp_s = d.frame_stamps_s[k - 1];
-    e.arrival_s = e.stamp_s + image_latency_s;
-    e.frame = static_cast<int>(k);
-    e.motion = motions[k];
-    events.push_back(e);
+/// Image motion alone from the true first position (a failed pair keeps the previous pair's motion).
+std::vector<Eigen::Vector2d> imageOnlyTrack(const std::vector<fusion::MetricMotion>& motions,
+                                            const Eigen::Vector2d& start_en_m) {
+  std::vector<Eigen::Vector2d> track(motions.size());
+  track[0] = start_en_m;
+  Eigen::Vector2d last_motion = Eigen::Vector2d::Zero();
+  for (size_t k = 1; k < motions.size(); ++k) {
+    if (motions[k].valid) last_motion = motions[k].camera_displacement_en_m;
+    track[k] = track[k - 1] + last_motion;
   }
-  const auto camera_en = [&](const Eigen::Vector3d& base, const Eigen::Quaterniond& q) {
-    return fusion::cameraPosition(base, q, mount.base_from_camera).head<2>().eval();
-  };
-  std::map<double, Eigen::Vector2d>& dr_at = src.dr_at;  // DR camera centre by stamp
-  for (const sim::PoseRecord& r : d.dead_reckoning) {
-    if (r.stamp_s < t0) continue;
-    NavEvent e;
-    e.kind = NavEvent::kDeadReckoning;
-    e.stamp_s = e.arrival_s = r.stamp_s;
-    e.value = camera_en(r.position_m, r.orientation);
-    e.covariance = r.pose_covariance.block<2, 2>(0, 0);
-    dr_at[r.stamp_s] = e.value;
-    events.push_back(e);
+  return track;
+}
+
+/// The dead-reckoning camera centre at each frame stamp (NaN where none was received at that stamp).
+std::vector<Eigen::Vector2d> navigationTrack(const std::map<double, Eigen::Vector2d>& dr_at,
+                                             const std::vector<double>& frame_stamps) {
+  std::vector<Eigen::Vector2d> track(frame_stamps.size(), Eigen::Vector2d(std::nan(""), std::nan("")));
+  for (size_t k = 0; k < frame_stamps.size(); ++k) {
+    auto it = dr_at.find(frame_stamps[k]);
+    if (it != dr_at.end()) track[k] = it->second;
   }
-  std::vector<double>& usbl_errors = src.usbl_errors;
-  int& usbl_outliers = src.usbl_outliers;
-  for (const sim::FixRecord& f : d.usbl) {
-    if (f.stamp_s <= t0) continue;
-    const Eigen::Vector2d base_en = grid.toGrid(f.latitude_deg, f.longitude_deg);
-    const Eigen::Vector3d base(base_en.x(), base_en.y(), f.altitude_m);
-    NavEvent e;
-    e.kind = NavEvent::kFix;
-    e.stamp_s = f.stamp_s;
-    e.arrival_s = f.arrival_s;
-    e.value = camera_en(base, attitudeAt(d.imu, f.stamp_s));
-    e.covariance = f.horizontal_sigma_m * f.horizontal_sigma_m * Eigen::Matrix2d::Identity();
-    events.push_back(e);
-    // Against the truth at the fix's stamp (a frame stamp: fixes at whole seconds, frames at 5 Hz).
-    auto it = std::lower_bound(d.frame_stamps_s.begin(), d.frame_stamps_s.end(), f.stamp_s);
-    if (it != d.frame_stamps_s.end() && *it == f.stamp_s) {
-      const double error = (e.value - truth[it - d.frame_stamps_s.begin()]).norm();
-      usbl_errors.push_back(error);
-      usbl_outliers += error > 4.0 * usbl_sigma;
-    }
+  return track;
+}
+
+/// The fixes' errors against the truth at their stamps (fixes at whole seconds coincide with frame stamps).
+std::vector<double> fixErrors(const std::vector<fusion::AbsoluteConstraint>& fixes,
+                              const std::vector<double>& frame_stamps, const std::vector<Eigen::Vector2d>& truth) {
+  std::vector<double> errors;
+  for (const fusion::AbsoluteConstraint& f : fixes) {
+    auto it = std::lower_bound(frame_stamps.begin(), frame_stamps.end(), f.stamp_s);
+    if (it != frame_stamps.end() && *it == f.stamp_s)
+      errors.push_back((f.position_en_m - truth[it - frame_stamps.begin()]).norm());
   }
-  std::stable_sort(events.begin(), events.end(),
-                   [](const NavEvent& a, const NavEvent& b) { return a.arrival_s < b.arrival_s; });
-  return src;
+  return errors;
 }
 
 /// The filter configured from the navigation sensors' specifications, as an operator would from their datasheets
@@ -695,58 +714,51 @@ int main(int argc, char** argv) {
             << " m, grid " << grid.name() << " (EPSG " << grid.epsg() << "), " << d.usbl.size() << " USBL fixes, "
             << d.dead_reckoning.size() << " DR records\n";
 
-  // ---- 2. Registration of consecutive frames ----
+  // ---- 2. Registration of consecutive frames, through registration_node's front-end ----
   registration::RegistrationConfig reg_config;
   reg_config.method = registration::RegistrationMethod::kAuto;
   reg_config.model = registration::MotionModel::kHomography;
-  std::unique_ptr<registration::FrameRegistrar> registrar = registration::makeRegistrar(reg_config);
+  registration::SequenceRegistrar sequence(registration::makeRegistrar(reg_config),
+                                           registration::SequenceRegistrarConfig());
   std::vector<registration::MotionEstimate> estimates(n);
-  Eigen::Matrix3d prediction = Eigen::Matrix3d::Identity();
   auto t_start = Clock::now();
   int registration_failures = 0;
   for (size_t k = 0; k < n; ++k) {
-    estimates[k] = registrar->registerNext(d.gray[k], prediction);
-    prediction = estimates[k].failed ? Eigen::Matrix3d::Identity() : estimates[k].pixel_matrix;
-    if (k > 0 && estimates[k].failed) ++registration_failures;
+    const registration::SequenceStep step = sequence.add(d.gray[k], d.frame_stamps_s[k]);
+    if (k == 0) continue;
+    if (step.has_motion) estimates[k] = step.motion;  // otherwise a restart: the default estimate is a failure
+    if (estimates[k].failed) ++registration_failures;
   }
   const double registration_s = secondsSince(t_start);
   std::cout << "registration: " << n - 1 << " pairs in " << registration_s << " s (" << (n - 1) / registration_s
             << " pairs/s), " << registration_failures << " failed\n";
 
-  // ---- 3 and 4. Metric conversion, and every source in arrival order ----
+  // ---- 3. Every source in arrival order; the metric conversion by the front-end ----
   fusion::CameraMount mount;
   mount.camera_matrix << rig.camera.fx, 0.0, rig.camera.cx, 0.0, rig.camera.fy, rig.camera.cy, 0.0, 0.0, 1.0;
   mount.base_from_camera = rig.baseFromCamera();
   const double usbl_sigma = dive.synthesis.navigation.usbl_noise_m;
-  const Sources sources = buildSources(d, estimates, mount, grid, truth, rig.lever_arm_m, usbl_sigma);
-  const std::vector<fusion::ViewGeometry>& views = sources.views;
-  const std::vector<fusion::MetricMotion>& motions = sources.motions;
-  const std::vector<NavEvent>& events = sources.events;
-  const std::map<double, Eigen::Vector2d>& dr_at = sources.dr_at;
-  const std::vector<double>& usbl_errors = sources.usbl_errors;
-  const int usbl_outliers = sources.usbl_outliers;
-  std::cout << "metric motion: per-pair displacement RMSE " << 1000.0 * sources.metric_step_rmse_m << " mm over "
-            << sources.metric_count << " pairs (their covariances say " << 1000.0 * sources.metric_step_reported_rms_m
+  const std::vector<NavEvent> events = buildEvents(d, grid);
+  // A first pass gives the metric motions, the views, the dead reckoning and the fixes as the front-end makes them
+  // (none of them depends on the filter's settings, which are calibrated from them below).
+  const FilterRun conversion =
+      runFilter(frontEndConfig(filterConfigForSensors(dive.synthesis.navigation), dive.synthesis.navigation), rig,
+                mount.camera_matrix, estimates, events, true, true, d.frame_stamps_s);
+  const std::vector<std::optional<fusion::ViewGeometry>>& views = conversion.views;
+  const std::vector<fusion::MetricMotion>& motions = conversion.motions;
+  const MetricStats metric = metricStats(motions, truth);
+  const std::vector<double> usbl_errors = fixErrors(conversion.fixes, d.frame_stamps_s, truth);
+  int usbl_outliers = 0;
+  for (double e : usbl_errors) usbl_outliers += e > 4.0 * usbl_sigma;
+  std::cout << "metric motion: per-pair displacement RMSE " << 1000.0 * metric.step_rmse_m << " mm over "
+            << metric.count << " pairs (their covariances say " << 1000.0 * metric.step_reported_rms_m
             << " mm); per axis, along the motion "
-            << 1000.0 * std::sqrt(sources.metric_step_along_sq_m2 / std::max(1, sources.metric_step_axis_count))
-            << " mm, across it "
-            << 1000.0 * std::sqrt(sources.metric_step_cross_sq_m2 / std::max(1, sources.metric_step_axis_count))
-            << " mm\n";
+            << 1000.0 * std::sqrt(metric.along_sq_m2 / std::max(1, metric.axis_count)) << " mm, across it "
+            << 1000.0 * std::sqrt(metric.cross_sq_m2 / std::max(1, metric.axis_count)) << " mm\n";
 
   // ---- 5. Single sources ----
-  // Image motion alone from the true first position (a failed pair keeps the previous pair's motion).
-  std::vector<Eigen::Vector2d> image_only(n);
-  image_only[0] = truth[0];
-  Eigen::Vector2d last_motion = Eigen::Vector2d::Zero();
-  for (size_t k = 1; k < n; ++k) {
-    if (motions[k].valid) last_motion = motions[k].camera_displacement_en_m;
-    image_only[k] = image_only[k - 1] + last_motion;
-  }
-  std::vector<Eigen::Vector2d> nav_only(n, Eigen::Vector2d(std::nan(""), std::nan("")));
-  for (size_t k = 0; k < n; ++k) {
-    auto it = dr_at.find(d.frame_stamps_s[k]);
-    if (it != dr_at.end()) nav_only[k] = it->second;
-  }
+  const std::vector<Eigen::Vector2d> image_only = imageOnlyTrack(motions, truth[0]);
+  const std::vector<Eigen::Vector2d> nav_only = navigationTrack(conversion.dr_at, d.frame_stamps_s);
   double usbl_sq = 0.0, usbl_inlier_sq = 0.0;
   int usbl_inliers = 0;
   for (double e : usbl_errors) {
@@ -765,16 +777,16 @@ int main(int argc, char** argv) {
   // measured per-pair error (against the simulator's truth) leaves beyond the covariance the registrar reports, per
   // axis along and across each step's motion (the error is anisotropic). (The default, 1 mm on both axes, is a guess
   // for relief and refraction, neither of which this flat dive has.)
-  const double axis_count = std::max(1, sources.metric_step_axis_count);
-  const double calibrated_image_step_noise_along_m = std::sqrt(std::max(
-      0.0, (sources.metric_step_along_sq_m2 - sources.metric_step_along_reported_m2) / axis_count));
-  const double calibrated_image_step_noise_across_m = std::sqrt(std::max(
-      0.0, (sources.metric_step_cross_sq_m2 - sources.metric_step_cross_reported_m2) / axis_count));
+  const double axis_count = std::max(1, metric.axis_count);
+  const double calibrated_image_step_noise_along_m =
+      std::sqrt(std::max(0.0, (metric.along_sq_m2 - metric.along_reported_m2) / axis_count));
+  const double calibrated_image_step_noise_across_m =
+      std::sqrt(std::max(0.0, (metric.cross_sq_m2 - metric.cross_reported_m2) / axis_count));
   std::cout << "image step noise calibrated from the registration's accuracy: "
             << 1000.0 * calibrated_image_step_noise_along_m << " mm along the motion, "
             << 1000.0 * calibrated_image_step_noise_across_m << " mm across it (the registrar's covariances say "
-            << 1000.0 * std::sqrt(sources.metric_step_along_reported_m2 / axis_count) << " / "
-            << 1000.0 * std::sqrt(sources.metric_step_cross_reported_m2 / axis_count) << " mm)\n";
+            << 1000.0 * std::sqrt(metric.along_reported_m2 / axis_count) << " / "
+            << 1000.0 * std::sqrt(metric.cross_reported_m2 / axis_count) << " mm)\n";
   const auto configure = [&](const sim::NavigationSensorConfig& sensors, fusion::FilterConfig* c) {
     *c = filterConfigForSensors(sensors);
     c->image_step_noise_along_m = calibrated_image_step_noise_along_m;
@@ -789,13 +801,10 @@ int main(int argc, char** argv) {
   fusion::FilterConfig config;
   if (!configure(dive.synthesis.navigation, &config)) return 2;
   for (const auto& [name, value] : filter_overrides) std::cout << "filter: " << name << " = " << value << "\n";
-  // Initial state: the first DR position (the vehicle's navigation starts at the launch point) with its covariance.
-  const Eigen::Vector2d p0 = dr_at.count(t0) ? dr_at.at(t0) : truth[0];
-  Eigen::Matrix2d P0 = d.dead_reckoning.front().pose_covariance.block<2, 2>(0, 0);
-  for (const sim::PoseRecord& r : d.dead_reckoning)
-    if (r.stamp_s == t0) P0 = r.pose_covariance.block<2, 2>(0, 0);
-  const FilterRun nav_run = runFilter(config, events, false, true, t0, p0, P0, d.frame_stamps_s);
-  const FilterRun all = runFilter(config, events, true, true, t0, p0, P0, d.frame_stamps_s);
+  const fusion::FusionFrontEndConfig front_end = frontEndConfig(config, dive.synthesis.navigation);
+  const FilterRun nav_run =
+      runFilter(front_end, rig, mount.camera_matrix, estimates, events, false, true, d.frame_stamps_s);
+  const FilterRun all = runFilter(front_end, rig, mount.camera_matrix, estimates, events, true, true, d.frame_stamps_s);
 
   // ---- 7. Scores ----
   const double rmse_image_only = rmse(image_only, truth);
@@ -862,8 +871,10 @@ int main(int argc, char** argv) {
       const CrossRegistration reg =
           registerAcrossPasses(siftFeatures(d.gray[out]), siftFeatures(d.gray[ret]), d.gray[ret].cols, d.gray[ret].rows);
       if (!reg.found) continue;
+      if (!views[out] || !views[ret]) continue;
       const fusion::MetricMotion m = fusion::toMetricMotion(registration::MotionModel::kHomography, reg.parameters,
-                                                            reg.covariance, reg.centre_px, mount, views[out], views[ret]);
+                                                            reg.covariance, reg.centre_px, mount, *views[out],
+                                                            *views[ret]);
       if (!m.valid) continue;
       fusion::RelativeConstraint c;
       c.from_stamp_s = d.frame_stamps_s[out];
@@ -879,11 +890,8 @@ int main(int argc, char** argv) {
               << 1000.0 * percentile(constraint_errors_m, 0.95) << " mm\n";
     json.set("cross_pass_constraint_error_median_m", percentile(constraint_errors_m, 0.5));
     cross_constraints = static_cast<int>(cross.size());
-    std::vector<fusion::AbsoluteConstraint> fixes;
-    for (const NavEvent& e : events)
-      if (e.kind == NavEvent::kFix) fixes.push_back({e.stamp_s, e.value, e.covariance});
     const fusion::CrossPassResult result =
-        fusion::smoothWithCrossPassConstraints(all.log, all.smoothed_states, fixes, cross);
+        fusion::smoothWithCrossPassConstraints(all.log, all.smoothed_states, all.fixes, cross);
     cross_seconds = secondsSince(cross_start);
     std::vector<Eigen::Vector2d> cross_track(n, Eigen::Vector2d(std::nan(""), std::nan("")));
     for (size_t k = 0; k < n; ++k)
@@ -949,22 +957,19 @@ int main(int argc, char** argv) {
         run_mount.camera_matrix(0, 0) *= focal_scale;
         run_mount.camera_matrix(1, 1) *= focal_scale;
       }
-      const Sources rs = buildSources(r, estimates, run_mount, grid, truth, rig.lever_arm_m, usbl_sigma);
-      std::vector<Eigen::Vector2d> r_nav(n, Eigen::Vector2d(std::nan(""), std::nan("")));
-      for (size_t k = 0; k < n; ++k) {
-        auto it = rs.dr_at.find(d.frame_stamps_s[k]);
-        if (it != rs.dr_at.end()) r_nav[k] = it->second;
-      }
+      const FilterRun fr = runFilter(frontEndConfig(mc_config, sc.navigation), rig, run_mount.camera_matrix, estimates,
+                                     buildEvents(r, grid), true, true, d.frame_stamps_s);
+      const std::vector<Eigen::Vector2d> r_nav = navigationTrack(fr.dr_at, d.frame_stamps_s);
       double usbl_sq = 0.0;
-      for (double e : rs.usbl_errors) usbl_sq += e * e;
-      const double r_rmse_usbl = std::sqrt(usbl_sq / std::max<size_t>(1, rs.usbl_errors.size()));
-      Eigen::Matrix2d r_P0 = r.dead_reckoning.front().pose_covariance.block<2, 2>(0, 0);
-      const Eigen::Vector2d r_p0 = rs.dr_at.count(t0) ? rs.dr_at.at(t0) : truth[0];
-      const FilterRun fr = runFilter(mc_config, rs.events, true, true, t0, r_p0, r_P0, d.frame_stamps_s);
+      const std::vector<double> r_usbl_errors = fixErrors(fr.fixes, d.frame_stamps_s, truth);
+      for (double e : r_usbl_errors) usbl_sq += e * e;
+      const double r_rmse_usbl = std::sqrt(usbl_sq / std::max<size_t>(1, r_usbl_errors.size()));
+      const double r_rmse_image = rmse(imageOnlyTrack(fr.motions, truth[0]), truth);
       const double r_filtered = rmse(fr.filtered, truth), r_nav_rmse = rmse(r_nav, truth);
       mc_rmse_filtered.push_back(r_filtered);
       mc_rmse_nav.push_back(r_nav_rmse);
-      mc_ratio.push_back(r_filtered / std::min(r_nav_rmse, r_rmse_usbl));
+      // The better single source among the three the filter fuses: dead reckoning, USBL, the images.
+      mc_ratio.push_back(r_filtered / std::min({r_nav_rmse, r_rmse_usbl, r_rmse_image}));
       for (size_t k = 0; k < n; ++k) {
         if (fr.frame_step[k] < 0) continue;
         const Eigen::Vector2d e = fr.filtered[k] - truth[k];
@@ -1032,7 +1037,8 @@ int main(int argc, char** argv) {
       sim::rpyFromRotation(attitudeAt(d.imu, d.frame_stamps_s.back()).toRotationMatrix()).z() -
           d.vehicle_yaw_rad.back(),
       2.0 * M_PI);
-  const double better_single = std::min(rmse_nav_only, rmse_usbl);
+  // The better single source among the three the filter fuses: dead reckoning, USBL, the images.
+  const double better_single = std::min({rmse_nav_only, rmse_usbl, rmse_image_only});
   const double updates_per_s = all.events / all.filter_seconds;
   std::cout << "\nFusion, out-and-back over " << path_m << " m (" << n << " PAL frames at "
             << rig.fps << " fps, mean GSD " << 1000.0 * gsd_mean << " mm), against the true camera centre:\n"
@@ -1093,7 +1099,7 @@ int main(int argc, char** argv) {
   json.set("mean_gsd_m", gsd_mean);
   json.set("registration_failures", registration_failures);
   json.set("registration_pairs_per_s", (n - 1) / registration_s);
-  json.set("metric_step_rmse_m", sources.metric_step_rmse_m);
+  json.set("metric_step_rmse_m", metric.step_rmse_m);
   json.set("image_step_noise_calibrated_along_m", calibrated_image_step_noise_along_m);
   json.set("image_step_noise_calibrated_across_m", calibrated_image_step_noise_across_m);
   json.set("rmse_image_only_m", rmse_image_only);
