@@ -150,7 +150,7 @@ Speed speed(RegistrationMethod method, MotionModel model, const std::vector<cv::
             const std::vector<double>& stamps_s, double min_seconds) {
   SequenceRegistrar sequence(makeRegistrar(configFor(method, model)), SequenceRegistrarConfig());
   FrameRegistrar* inner = &sequence.registrar();
-  if (auto* normalizing = dynamic_cast<NormalizingRegistrar*>(r.get())) inner = &normalizing->inner();
+  if (auto* normalizing = dynamic_cast<NormalizingRegistrar*>(inner)) inner = &normalizing->inner();
   const auto* klt = dynamic_cast<const KltRegistrar*>(inner);
   Speed s;
   s.has_stages = klt != nullptr;
