@@ -73,17 +73,19 @@ BENCHMARKS = {
             'Corner-transfer error: for each image pair, the largest distance (px) between where the estimated and '
             'the true motion send the four image corners. Median and p95 are over the pairs the method did not '
             'report as failed. A failure is a pair the method reports as failed; a gross failure is a pair not '
-            'reported as failed whose error exceeds 2 px. Rates are fractions of the pairs scored (`dive_pairs`; 0.005 = 0.5 %).',
-            'Each method runs over the whole sequence with `registerNext`, the previous motion as the starting '
-            'guess, with illumination normalisation. Keys without a suffix (`klt_*`, `rmr_*`, `auto_*`) use the '
-            'homography model; `*_similarity` and `*_affine` the other models. The dark and turbid medians are the '
-            'same run scored on those stretches only.',
+            'reported as failed whose error exceeds 2 px. Rates are fractions of the pairs scored (`dive_pairs`; '
+            '0.005 = 0.5 %).',
+            'Each method runs over the whole sequence through registration_node\'s own front-end '
+            '(`SequenceRegistrar`: the previous motion scaled to the frame interval as the starting guess, the '
+            'restart policy, the fallback), with illumination normalisation. Keys without a suffix (`klt_*`, '
+            '`rmr_*`, `auto_*`) use the homography model; `*_similarity` and `*_affine` the other models. The dark '
+            'and turbid medians are the same run scored on those stretches only.',
             'NEES ratio: median over the pairs of the corner NEES (errors weighed by the reported covariance) '
             'divided by its expectation for a right covariance; 1 is consistent, above 1 the covariance is too '
             'small.',
             'Peers: OpenCV `findTransformECC` (affine, 3-level pyramid) and ORB (1000 features) + '
             '`estimateAffinePartial2D` (RANSAC), on every 5th pair (every 50th for ECC\'s HD speed).',
-            'Speed: `registerNext` on 300 frames (12 s) of the dive, repeated for at least 2-3 s of wall time, one '
+            'Speed: the same front-end on 300 frames (12 s) of the dive, repeated for at least 2-3 s of wall time, one '
             'thread (`cv::setNumThreads(1)`), illumination normalisation included; `*_fps_*` is wall-clock, '
             '`*_fps_*_cpu` per second of the thread\'s CPU time. `klt_fps_pal` and `rmr_fps_pal` use the '
             'similarity model, `*_homography_fps_*` the homography. On a shared machine the wall-clock rate varies '
@@ -137,17 +139,19 @@ BENCHMARKS = {
                 'simulator\'s default drift; heading alignment error 2 mrad at launch. Ground truth: the simulator\'s '
                 'camera centre at every frame.',
         'method': [
-            'The simulator runs in-process; consecutive frames are registered (homography, method auto), converted '
-            'to metres (attitude from the IMU, height from the altimeter, the camera\'s lever arm) and fed with the '
-            'dead reckoning and the late USBL fixes, in arrival order, to the filter; the RTS smoother runs over '
-            'the whole dive. Every track is scored against the true camera centre at the image stamps.',
+            'The simulator runs in-process. Consecutive frames are registered by registration_node\'s own '
+            'front-end (`SequenceRegistrar`: homography, method auto), and every sensor\'s records are fed, in '
+            'arrival order, to fusion_node\'s own front-end (`FusionFrontEnd`: attitude and altimeter histories, '
+            'roll, pitch and range fitted over +-1 s at each image, metric conversion with the camera, lever arms) '
+            'and its filter; the RTS smoother runs over the whole dive. Every track is scored against the true '
+            'camera centre at the image stamps.',
             'The filter is configured from the simulated sensors\' specifications (gyro noise and bias, DVL noise and '
             'scale error), as an operator would from datasheets (`filterConfigForSensors`). The image step noise '
             'along and across each step\'s motion is calibrated from the registration\'s error against the '
             'simulator\'s truth, as one calibrates a sensor (`image_step_noise_calibrated_*`).',
-            'RMSE: root mean square horizontal position error (m). "Better single source" is the smaller RMSE of '
-            'dead reckoning alone and USBL alone; `filtered_over_better_single_source` is the filtered RMSE (all '
-            'sources) divided by it.',
+            'RMSE: root mean square horizontal position error (m). "Better single source" is the smallest RMSE of '
+            'image motion alone, dead reckoning alone and USBL alone; `filtered_over_better_single_source` is the '
+            'filtered RMSE (all sources) divided by it, in the rendered dive and in each Monte Carlo run.',
             'Return misalignment: for each image of the return pass and the nearest image of the outbound pass, the '
             'error of their estimated relative position, in ground sample distances (GSD, the pixel size on the '
             'seabed); median and p95 over those pairs. Cross-pass constraints: SIFT matches between the passes '
@@ -417,7 +421,8 @@ BENCHMARKS = {
             ('visp_tutorial_iterations', 'ViSP 4-point tutorial: iterations to |e|^2 < 1e-4'),
             ('trajectory_prediction_err_mm', 'circle, 0.5 px: largest distance to the prediction (mm)'),
             ('trajectory_prediction_err_mm_noise_free', 'circle, no noise: largest distance to the prediction (mm)'),
-            ('trajectory_prediction_err_mm_1000_points', 'circle, 1000 points: largest distance to the prediction (mm)'),
+            ('trajectory_prediction_err_mm_1000_points',
+             'circle, 1000 points: largest distance to the prediction (mm)'),
             ('circle_drift_mm', 'circle, 0.5 px: drift after 20 servoings (mm)'),
             ('circle_drift_mm_noise_free', 'circle, no noise: drift after 20 servoings (mm)'),
             ('circle_drift_mm_1000_points', 'circle, 1000 points: drift after 20 servoings (mm)'),
@@ -435,8 +440,8 @@ BENCHMARKS = {
                     'law): final pose error, control rate on one core, and the 2D4 report\'s circular acquisition, '
                     'through the simulated arm and free-flying.',
         'data': 'exocet_servo\'s ray-cast textured vent (0.3 m high) on a seabed, rendered at 640x480 for two '
-                'cameras with different intrinsics (left 800 px, right 720 px focal length). Four starts 50-100 mm '
-                'and 5-9 degrees from the goal. The rig transform: baseline 0.3 m, pan 18 degrees. The simulated '
+                'cameras with different intrinsics (focal lengths 800 px left, 720 x 725 px right). Four starts '
+                '50-100 mm and 5-9 degrees from the goal. The rig transform: baseline 0.3 m, pan 18 degrees. The simulated '
                 '6-DOF arm (reach 1.22 m) with its joint limits.',
         'method': [
             'Image loop: the right camera takes the reference image; the left camera is servoed until convergence; '
