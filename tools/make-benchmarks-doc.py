@@ -441,8 +441,8 @@ BENCHMARKS = {
                     'through the simulated arm and free-flying.',
         'data': 'exocet_servo\'s ray-cast textured vent (0.3 m high) on a seabed, rendered at 640x480 for two '
                 'cameras with different intrinsics (focal lengths 800 px left, 720 x 725 px right). Four starts '
-                '50-100 mm and 5-9 degrees from the goal. The rig transform: baseline 0.3 m, pan 18 degrees. The simulated '
-                '6-DOF arm (reach 1.22 m) with its joint limits.',
+                '50-100 mm and 5-9 degrees from the goal. The rig transform: baseline 0.3 m, pan 18 degrees. The '
+                'simulated 6-DOF arm (reach 1.22 m) with its joint limits.',
         'method': [
             'Image loop: the right camera takes the reference image; the left camera is servoed until convergence; '
             'final error against the right camera\'s pose. `*_without_anchoring`: the same without re-anchoring the '
