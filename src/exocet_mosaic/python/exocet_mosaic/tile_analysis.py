@@ -1,9 +1,13 @@
-"""Reading GeoTIFF tiles back and measuring them against ground truth (shared by the tile tests and bench_tiles).
+"""Reading GeoTIFF tiles back and measuring them against ground truth: the one implementation the tile tests and
+bench_tiles share.
 
 Needs python3-gdal and python3-opencv. Coordinates: UTM easting/northing (m); a tile's geotransform is
 [E0, gsd, 0, N0, 0, -gsd] (north-up), pixel (col, row) -> E0 + (col + 0.5) * gsd, N0 - (row + 0.5) * gsd at its centre.
 """
+import glob
 import math
+import os
+import re
 
 import cv2
 import numpy as np
@@ -11,33 +15,49 @@ from osgeo import gdal, osr
 
 gdal.UseExceptions()
 
+# Overlaps narrower than this (either side, tile pixels) give no reliable shift.
+MIN_OVERLAP_PX = 96
+# A checker landmark is taken as found when the normalised correlation with a synthetic checker reaches this.
+MIN_CHECKER_SCORE = 0.6
+
 
 class Tile:
-    """A GeoTIFF tile read back with GDAL: grey image, data mask, geotransform, EPSG, metadata."""
+    """A GeoTIFF tile read back with GDAL: grey image (luminance), data mask, geotransform, EPSG, metadata."""
 
     def __init__(self, path):
         dataset = gdal.Open(path)
         self.path = path
+        self.name = os.path.basename(path)
         self.width, self.height = dataset.RasterXSize, dataset.RasterYSize
         self.geotransform = dataset.GetGeoTransform()
-        srs = osr.SpatialReference(wkt=dataset.GetProjection())
-        srs.AutoIdentifyEPSG()
-        self.epsg = int(srs.GetAuthorityCode(None) or 0)
-        self.metadata = dataset.GetMetadata()
-        bands = [dataset.GetRasterBand(i + 1) for i in range(dataset.RasterCount)]
-        colour = [b for b in bands if b.GetColorInterpretation() != gdal.GCI_AlphaBand]
-        alpha = [b for b in bands if b.GetColorInterpretation() == gdal.GCI_AlphaBand]
-        planes = [b.ReadAsArray() for b in colour]
-        self.grey = planes[0].astype(np.float32) if len(planes) == 1 else np.mean(planes[:3], axis=0).astype(np.float32)
-        if alpha:
-            self.mask = alpha[0].ReadAsArray() > 0
-        else:
-            self.mask = colour[0].GetMaskBand().ReadAsArray() > 0
-        self.band_count = dataset.RasterCount
         self.gsd_m = self.geotransform[1]
+        self.epsg = None
+        if dataset.GetProjection():
+            srs = osr.SpatialReference(wkt=dataset.GetProjection())
+            srs.AutoIdentifyEPSG()
+            code = srs.GetAuthorityCode(None)
+            self.epsg = int(code) if code else None
+        self.metadata = dataset.GetMetadata() or {}
+        self.compression = (dataset.GetMetadata('IMAGE_STRUCTURE') or {}).get('COMPRESSION')
+        self.band_count = dataset.RasterCount
+        bands = [dataset.GetRasterBand(i + 1) for i in range(dataset.RasterCount)]
+        self.band_types = [gdal.GetColorInterpretationName(b.GetColorInterpretation()) for b in bands]
+        colour = [b.ReadAsArray() for b in bands if b.GetColorInterpretation() != gdal.GCI_AlphaBand]
+        if len(colour) >= 3:
+            # Bands in R, G, B order (GDAL's photometric interpretation): ITU-R BT.601 luminance.
+            self.grey = (0.299 * colour[0] + 0.587 * colour[1] + 0.114 * colour[2]).astype(np.float32)
+        else:
+            self.grey = colour[0].astype(np.float32)
+        # The alpha band (DEFLATE) or the internal mask (JPEG): GDAL gives both as the first band's mask.
+        self.mask = bands[0].GetMaskBand().ReadAsArray() > 0
+        self.valid_fraction = float(self.mask.mean())
+        self.file_mb = os.path.getsize(path) / 1e6
+        self.world_file = os.path.exists(os.path.splitext(path)[0] + '.tfw')
+        match = re.search(r'_(\d+)\.tif$', self.name)
+        self.index = int(match.group(1)) if match else -1
 
     def to_pixel(self, easting_m, northing_m):
-        """Continuous pixel coordinates (x right, y down; pixel centres at integer + 0.5 are corners' halves)."""
+        """Continuous pixel coordinates (x right, y down), pixel centres on integers (OpenCV's convention)."""
         e0, gsd, _, n0, _, _ = self.geotransform
         return (easting_m - e0) / gsd - 0.5, (n0 - northing_m) / gsd - 0.5
 
@@ -53,17 +73,28 @@ class Tile:
         return bool(np.all(self.mask[yi - margin_px:yi + margin_px + 1, xi - margin_px:xi + margin_px + 1]))
 
 
+def tile_paths(folder):
+    """The numbered tiles of a folder (NAME_NNNN.tif; COG copies, NAME_NNNN.cog.tif, left out), in index order."""
+    return sorted(glob.glob(os.path.join(folder, '*_[0-9][0-9][0-9][0-9].tif')))
+
+
+def read_tiles(folder):
+    return [Tile(p) for p in tile_paths(folder)]
+
+
 def read_world_file(path):
     with open(path) as f:
         return [float(line) for line in f.read().split()]
 
 
-def find_checker_saddle(tile, easting_m, northing_m, size_m, search_m=None):
+def find_checker_saddle(tile, easting_m, northing_m, size_m, search_m=None, min_score=MIN_CHECKER_SCORE):
     """Locates the centre (saddle) of a 2x2 checker landmark of side size_m near a predicted position.
 
-    Returns (easting_m, northing_m) of the saddle found, or None when the window leaves the data. The search covers
-    +-search_m (default a third of the side) around the prediction: the landmark is found by correlating a synthetic
-    checker (both polarities), then refined by cv2.cornerSubPix.
+    Returns (easting_m, northing_m, score) of the saddle found, or None. The search covers +-search_m (default a
+    third of the side) around the prediction: a synthetic checker (either polarity) is correlated with the tile
+    where the whole checker lies on data (no-data pixels are filled with the mean, so that a strip's edge is no
+    corner), then the saddle is refined by cv2.cornerSubPix; a refinement that runs further than its window is
+    refused (it left the saddle).
     """
     search_m = size_m / 3.0 if search_m is None else search_m
     half_px = int(math.ceil((search_m + size_m / 2.0) / tile.gsd_m))
@@ -71,68 +102,174 @@ def find_checker_saddle(tile, easting_m, northing_m, size_m, search_m=None):
     xi, yi = int(round(x)), int(round(y))
     x0, y0 = max(0, xi - half_px), max(0, yi - half_px)
     x1, y1 = min(tile.width, xi + half_px + 1), min(tile.height, yi + half_px + 1)
-    side = max(8, int(round(0.8 * size_m / tile.gsd_m)) // 2 * 2)
+    side = max(8, int(round(0.8 * size_m / tile.gsd_m)) // 2 * 2)  # the inner 80 % of the board
     if x1 - x0 <= side or y1 - y0 <= side:
         return None
     valid = tile.mask[y0:y1, x0:x1]
     if valid.mean() < 0.25:
         return None
     window = tile.grey[y0:y1, x0:x1].copy()
-    window[~valid] = window[valid].mean()  # no data: neutral grey, so that the strip's edge is no corner
-    side = max(8, int(round(0.8 * size_m / tile.gsd_m)) // 2 * 2)
+    window[~valid] = window[valid].mean()
     template = np.ones((side, side), np.float32)
     template[: side // 2, : side // 2] = -1.0
     template[side // 2:, side // 2:] = -1.0
     score = np.abs(cv2.matchTemplate(window, template, cv2.TM_CCOEFF_NORMED))  # either polarity
-    # The whole checker must lie on data.
     inside = cv2.erode(valid.astype(np.uint8), np.ones((side, side), np.uint8), anchor=(0, 0))
     score[inside[: score.shape[0], : score.shape[1]] == 0] = 0.0
     _, best, _, loc = cv2.minMaxLoc(score)
-    if best < 0.6:
+    if best < min_score:
         return None
-    corner = np.array([[[loc[0] + side / 2.0 - 0.5, loc[1] + side / 2.0 - 0.5]]], np.float32)
+    start = np.array([[[loc[0] + side / 2.0 - 0.5, loc[1] + side / 2.0 - 0.5]]], np.float32)
     window8 = cv2.normalize(window, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     win = max(3, side // 6)
-    cv2.cornerSubPix(window8, corner, (win, win), (-1, -1),
-                     (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 0.01))
-    return tile.to_utm(x0 + float(corner[0, 0, 0]), y0 + float(corner[0, 0, 1]))
+    corner = cv2.cornerSubPix(window8, start.copy(), (win, win), (-1, -1),
+                              (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 0.01))
+    if math.hypot(corner[0, 0, 0] - start[0, 0, 0], corner[0, 0, 1] - start[0, 0, 1]) > 2.0 * win:
+        return None
+    e, n = tile.to_utm(x0 + float(corner[0, 0, 0]), y0 + float(corner[0, 0, 1]))
+    return e, n, float(best)
 
 
-def overlap_shifts_px(a, b, patch_px=256, min_response=0.2):
-    """Local shifts of tile b's content relative to tile a's where both have data.
+def ambiguous_landmarks(marks, search_m):
+    """Ids of the landmarks closer to another than the search window plus a board: they cannot be told apart."""
+    return {m['id'] for m in marks for o in marks if o is not m and math.hypot(
+        m['easting_m'] - o['easting_m'], m['northing_m'] - o['northing_m']) < search_m + max(m['size_m'], o['size_m'])}
 
-    The tiles share their GSD; b is resampled onto a's pixel grid (sub-pixel origin offsets included). The common
-    area is cut into patch_px squares that both cover entirely; each patch's shift is measured by phase correlation
-    (Hanning window). Local patches, because two tiles may overlap in different ways at once: consecutive tiles share
-    an image (they must agree), and a return pass over the same seabed is placed by the navigation alone.
-    Returns a list of (easting_m, northing_m, dx_px, dy_px, response) for the patches whose correlation peak is
-    clear (response >= min_response); empty when the tiles do not overlap.
+
+def landmark_observations(tiles, marks, search_m=0.25):
+    """Every sighting expected of a surveyed landmark (the whole board inside a tile's data), found or not.
+
+    marks: dicts with id, easting_m, northing_m, size_m. Returns dicts with tile, landmark, found, and when found
+    error_m, de_m, dn_m (found minus surveyed) and score. Landmarks that cannot be told apart are left out.
     """
-    if abs(a.gsd_m - b.gsd_m) > 1e-9 * a.gsd_m:
-        return []
-    # b's top-left corner in a's pixel-corner coordinates: b's pixel i lies on a's pixel i + offset.
-    off_x = (b.geotransform[0] - a.geotransform[0]) / a.gsd_m
-    off_y = (a.geotransform[3] - b.geotransform[3]) / a.gsd_m
-    c0, r0 = max(0, int(math.ceil(off_x))), max(0, int(math.ceil(off_y)))
-    c1, r1 = min(a.width, int(math.floor(off_x + b.width))), min(a.height, int(math.floor(off_y + b.height)))
-    if c1 - c0 < patch_px or r1 - r0 < patch_px:
-        return []
-    m = np.float32([[1, 0, c0 - off_x], [0, 1, r0 - off_y]])  # dst (a's grid) -> src (b's pixels)
-    size = (c1 - c0, r1 - r0)
-    b_grey = cv2.warpAffine(b.grey, m, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
-    b_mask = cv2.warpAffine(b.mask.astype(np.uint8), m, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
-    a_grey = a.grey[r0:r1, c0:c1]
-    common = a.mask[r0:r1, c0:c1] & b_mask
-    window = cv2.createHanningWindow((patch_px, patch_px), cv2.CV_32F)
-    shifts = []
-    for y in range(0, size[1] - patch_px + 1, patch_px // 2):
-        for x in range(0, size[0] - patch_px + 1, patch_px // 2):
-            if not common[y:y + patch_px, x:x + patch_px].all():
+    ambiguous = ambiguous_landmarks(marks, search_m)
+    observations = []
+    for tile in tiles:
+        for mark in marks:
+            if mark['id'] in ambiguous:
                 continue
-            pa = a_grey[y:y + patch_px, x:x + patch_px] - a_grey[y:y + patch_px, x:x + patch_px].mean()
-            pb = b_grey[y:y + patch_px, x:x + patch_px] - b_grey[y:y + patch_px, x:x + patch_px].mean()
-            (dx, dy), response = cv2.phaseCorrelate(np.ascontiguousarray(pa), np.ascontiguousarray(pb), window)
-            if response >= min_response:
-                e, n = a.to_utm(c0 + x + patch_px / 2.0, r0 + y + patch_px / 2.0)
-                shifts.append((e, n, dx, dy, response))
-    return shifts
+            half_px = int(math.ceil(mark['size_m'] / 2.0 / tile.gsd_m))
+            if not tile.has_data_at(mark['easting_m'], mark['northing_m'], margin_px=half_px):
+                continue
+            found = find_checker_saddle(tile, mark['easting_m'], mark['northing_m'], mark['size_m'], search_m=search_m)
+            obs = {'tile': tile.name, 'landmark': mark['id'], 'found': found is not None}
+            if found:
+                de, dn = found[0] - mark['easting_m'], found[1] - mark['northing_m']
+                obs.update({'error_m': math.hypot(de, dn), 'de_m': de, 'dn_m': dn, 'score': found[2]})
+            observations.append(obs)
+    return observations
+
+
+def resample_pair(a, b):
+    """Both tiles on the grid of a, cropped to their overlap's bounding box; None when they do not overlap."""
+    ga, gb = a.geotransform, b.geotransform
+    # Pixel of a -> continuous pixel of b (same GSD; origins may differ by a fraction of a pixel).
+    du = (ga[0] - gb[0]) / gb[1]
+    dv = (ga[3] - gb[3]) / gb[5]
+    c0, c1 = max(0, int(math.floor(-du))), min(a.width, int(math.ceil(b.width - du)))
+    r0, r1 = max(0, int(math.floor(-dv))), min(a.height, int(math.ceil(b.height - dv)))
+    if c1 - c0 < MIN_OVERLAP_PX or r1 - r0 < MIN_OVERLAP_PX:
+        return None
+    cols, rows = np.meshgrid(np.arange(c0, c1, dtype=np.float32) + np.float32(du),
+                             np.arange(r0, r1, dtype=np.float32) + np.float32(dv))
+    b_grey = cv2.remap(b.grey, cols, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    b_mask = cv2.remap(b.mask.astype(np.uint8), cols, rows, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                       borderValue=0) > 0
+    a_grey = a.grey[r0:r1, c0:c1]
+    both = a.mask[r0:r1, c0:c1] & b_mask
+    ys, xs = np.nonzero(both)
+    if len(xs) == 0 or xs.max() - xs.min() < MIN_OVERLAP_PX or ys.max() - ys.min() < MIN_OVERLAP_PX:
+        return None
+    box = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
+    return a_grey[box], b_grey[box], both[box]
+
+
+def pair_shift(a, b, patch_px=256, min_response=0.1):
+    """Shift (tile px) of tile b relative to tile a on their common grid.
+
+    The overlap is cut into windowed patches wholly inside both masks (a mask edge would pull the shift to zero),
+    each band-passed (the lamp's shading differs between passes, the seabed's texture does not) and
+    phase-correlated; the shift is the median of the patches whose peak is clear. None when the tiles do not
+    overlap; shift_px None when no two patches correlate (one patch alone may be a chance peak).
+    """
+    pair = resample_pair(a, b)
+    if pair is None:
+        return None
+    ia, ib, both = pair
+    f = max(1, int(round(0.004 / a.gsd_m)))  # work near 4 mm/px: the seabed's texture, not the pixel noise
+    if f > 1:
+        ia = cv2.resize(ia, None, fx=1.0 / f, fy=1.0 / f, interpolation=cv2.INTER_AREA)
+        ib = cv2.resize(ib, None, fx=1.0 / f, fy=1.0 / f, interpolation=cv2.INTER_AREA)
+        both = cv2.resize(both.astype(np.uint8), (ia.shape[1], ia.shape[0]), interpolation=cv2.INTER_NEAREST) > 0
+    ia = (ia - cv2.GaussianBlur(ia, (0, 0), 12)).astype(np.float64)
+    ib = (ib - cv2.GaussianBlur(ib, (0, 0), 12)).astype(np.float64)
+    h, w = both.shape
+    # Overlaps of adjacent lines are strips: smaller patches there (a patch holds shifts up to a quarter of it).
+    while True:
+        window = cv2.createHanningWindow((patch_px, patch_px), cv2.CV_64F)
+        patches = []
+        for r in range(0, h - patch_px + 1, patch_px // 2):
+            for c in range(0, w - patch_px + 1, patch_px // 2):
+                if not both[r:r + patch_px, c:c + patch_px].all():
+                    continue
+                (dx, dy), response = cv2.phaseCorrelate(ia[r:r + patch_px, c:c + patch_px],
+                                                        ib[r:r + patch_px, c:c + patch_px], window)
+                patches.append((dx, dy, response, c + 0.5 * patch_px, r + 0.5 * patch_px))
+        if len(patches) >= 2 or patch_px <= 64:
+            break
+        patch_px //= 2
+    out = {'patches': len(patches), 'patch_px': patch_px * f, 'overlap_px': int(both.sum()) * f * f, 'scale': f}
+    good = [p for p in patches if p[2] >= min_response]
+    out['patches_correlated'] = len(good)
+    if len(good) < 2:
+        out.update({'shift_px': None, 'dx_px': None, 'dy_px': None})
+        return out
+    # The median over patches: the shift of most of the overlap. The spread says how much it varies across the
+    # overlap (rotation or scale between the tiles, not a translation).
+    mdx, mdy = float(np.median([p[0] for p in good])), float(np.median([p[1] for p in good]))
+    dev = [math.hypot(p[0] - mdx, p[1] - mdy) for p in good]
+    out.update({'dx_px': mdx * f, 'dy_px': mdy * f, 'shift_px': math.hypot(mdx, mdy) * f,
+                'patches_agreeing_2px': sum(1 for d in dev if d * f < 2.0),
+                'response_median': float(np.median([p[2] for p in good])),
+                'spread_px': float(np.median(dev)) * f,
+                'patch_shift_p95_px': float(np.percentile([math.hypot(p[0], p[1]) for p in good], 95)) * f})
+    out.update(shift_field(good, f))
+    return out
+
+
+def shift_field(patches, f):
+    """What the patch shifts say about the pair: a translation, or a rotation / scale between the tiles (a shift that
+    grows across the overlap). Least squares of d = t + [s -r; r s] (x - mean x) over the patches (x: patch centre);
+    r in mrad, s in per mille, t in px; the residual is what neither explains (noise, perspective, blending)."""
+    if len(patches) < 3:
+        return {}
+    x = np.array([[p[3], p[4]] for p in patches], dtype=np.float64)
+    d = np.array([[p[0], p[1]] for p in patches], dtype=np.float64)
+    x -= x.mean(axis=0)
+    if np.ptp(x[:, 0]) + np.ptp(x[:, 1]) < 1e-6:
+        return {}
+    a = np.zeros((2 * len(patches), 4))
+    a[0::2] = np.c_[x[:, 0], -x[:, 1], np.ones(len(x)), np.zeros(len(x))]
+    a[1::2] = np.c_[x[:, 1], x[:, 0], np.zeros(len(x)), np.ones(len(x))]
+    sol, *_ = np.linalg.lstsq(a, d.reshape(-1), rcond=None)
+    res = d.reshape(-1) - a @ sol
+    return {'field_translation_px': math.hypot(sol[2], sol[3]) * f, 'field_rotation_mrad': sol[1] * 1e3,
+            'field_scale_permille': sol[0] * 1e3,
+            'field_residual_px': float(np.sqrt(np.mean(res[0::2] ** 2 + res[1::2] ** 2))) * f}
+
+
+def overlapping_pair_shifts(tiles):
+    """pair_shift of every pair of tiles in the same CRS and GSD that overlap, with a (first) and b (second) names
+    and whether they are consecutive (indices one apart: they share an image)."""
+    pairs = []
+    for i in range(len(tiles)):
+        for j in range(i + 1, len(tiles)):
+            a, b = tiles[i], tiles[j]
+            if a.epsg != b.epsg or abs(a.gsd_m - b.gsd_m) > 1e-9 * a.gsd_m:
+                continue
+            s = pair_shift(a, b, patch_px=256 if a.gsd_m < 0.004 else 192)
+            if s is None:
+                continue
+            s.update({'a': a.name, 'b': b.name, 'consecutive': b.index - a.index == 1})
+            pairs.append(s)
+    return pairs
