@@ -33,8 +33,8 @@
 #include "exocet_mosaic/fusion/navigation_filter.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
 #include "exocet_mosaic/fusion/utm_grid.h"
-#include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/motion_model.h"
+#include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
@@ -51,7 +51,7 @@ double secondsSince(Clock::time_point start) { return std::chrono::duration<doub
 // ---- The simulated dive, captured from the synthesizer's sink, and its cache ------------------------------------
 
 struct CapturedDive {
-  std::vector<cv::Mat> gray;                         ///< CV_8UC1, one per frame (dropped frames left out)
+  std::vector<cv::Mat> gray;  ///< CV_8UC1, one per frame (dropped frames left out)
   std::vector<double> frame_stamps_s;
   std::vector<Eigen::Isometry3d> world_from_camera;  ///< truth, UTM frame
   std::vector<double> gsd_m;                         ///< truth: ground sample distance
@@ -316,8 +316,8 @@ CrossRegistration registerAcrossPasses(const SiftFeatures& a, const SiftFeatures
     if (!mask.at<uchar>(int(i))) continue;
     const Eigen::Vector2d xa(pa[i].x, pa[i].y), xb(pb[i].x, pb[i].y);
     sum_sq += (registration::transferPoint(H, xa) - xb).squaredNorm();
-    const Eigen::MatrixXd J = registration::warpJacobian(model, r.parameters, xa.x() - r.centre_px.x(),
-                                                         xa.y() - r.centre_px.y());
+    const Eigen::MatrixXd J =
+        registration::warpJacobian(model, r.parameters, xa.x() - r.centre_px.x(), xa.y() - r.centre_px.y());
     jtj += J.transpose() * J;
     ++r.inliers;
   }
@@ -343,10 +343,10 @@ struct NavEvent {
   enum Kind { kImage, kDeadReckoning, kFix, kAttitude, kAltitude } kind = kImage;
   double arrival_s = 0.0;
   double stamp_s = 0.0;
-  int frame = -1;                                     ///< images: the current frame's index
+  int frame = -1;                                        ///< images: the current frame's index
   Eigen::Vector3d position_m = Eigen::Vector3d::Zero();  ///< dead reckoning, fixes: base_link in the UTM grid
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  ///< dead reckoning, attitude: world from base
-  double range_m = 0.0;                                               ///< altimeter
+  double range_m = 0.0;                                             ///< altimeter
   Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity();
 };
 
@@ -408,14 +408,14 @@ std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& 
 struct FilterRun {
   std::vector<Eigen::Vector2d> filtered;  ///< at each frame, from the final log (each fix at its own stamp)
   std::vector<Eigen::Matrix2d> filtered_covariance;
-  std::vector<Eigen::Vector2d> live;      ///< at each frame, as known when its image event had been processed
+  std::vector<Eigen::Vector2d> live;  ///< at each frame, as known when its image event had been processed
   std::vector<Eigen::Vector2d> smoothed;
   std::vector<Eigen::Matrix2d> smoothed_covariance;
-  std::vector<int> frame_step;            ///< index of each frame's step in the log (-1: none)
+  std::vector<int> frame_step;  ///< index of each frame's step in the log (-1: none)
   std::vector<fusion::FilterState> smoothed_states;
   std::vector<fusion::MetricMotion> motions;  ///< the front-end's metric motion of each pair (invalid: none)
   std::vector<std::optional<fusion::ViewGeometry>> views;  ///< the front-end's view of each frame
-  std::map<double, Eigen::Vector2d> dr_at;  ///< dead-reckoning camera centre by stamp, as the front-end placed it
+  std::map<double, Eigen::Vector2d> dr_at;        ///< dead-reckoning camera centre by stamp, as the front-end placed it
   std::vector<fusion::AbsoluteConstraint> fixes;  ///< the fixes moved to the camera, as the front-end gave them
   int events = 0;
   double filter_seconds = 0.0, smoother_seconds = 0.0;
@@ -426,7 +426,8 @@ struct FilterRun {
 };
 
 /// The front-end as fusion_node configures it from its parameters, for these sensors and this filter.
-fusion::FusionFrontEndConfig frontEndConfig(const fusion::FilterConfig& filter, const sim::NavigationSensorConfig& nav) {
+fusion::FusionFrontEndConfig frontEndConfig(const fusion::FilterConfig& filter,
+                                            const sim::NavigationSensorConfig& nav) {
   fusion::FusionFrontEndConfig c;
   c.filter = filter;
   c.keep_log = true;
@@ -504,7 +505,8 @@ FilterRun runFilter(const fusion::FusionFrontEndConfig& config, const sim::Camer
         if (!nav) continue;
         outcome = front.addFix(e.stamp_s, e.position_m.head<2>(), e.covariance, "", false);
         if (outcome.camera_en_m) run.fixes.push_back({e.stamp_s, *outcome.camera_en_m, e.covariance});
-        if (outcome.update) run.fixes_rejected_at_arrival += outcome.update->status == fusion::UpdateStatus::kRejectedByGate;
+        if (outcome.update)
+          run.fixes_rejected_at_arrival += outcome.update->status == fusion::UpdateStatus::kRejectedByGate;
         break;
     }
     ++run.events;
@@ -672,13 +674,20 @@ int main(int argc, char** argv) {
   std::vector<std::pair<std::string, double>> filter_overrides;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--output-dir" && i + 1 < argc) out_dir = argv[++i];
-    else if (a == "--shared-data" && i + 1 < argc) shared = argv[++i];
-    else if (a == "--dive" && i + 1 < argc) dive_yaml = argv[++i];
-    else if (a == "--no-cross-pass") cross_pass = false;
-    else if (a == "--monte-carlo-exact-camera") mc_draw_focal = false;
-    else if (a == "--monte-carlo" && i + 1 < argc) monte_carlo_runs = std::max(0, std::atoi(argv[++i]));
-    else if (a == "--monte-carlo-set" && i + 1 < argc) monte_carlo_overrides.push_back(argv[++i]);
+    if (a == "--output-dir" && i + 1 < argc)
+      out_dir = argv[++i];
+    else if (a == "--shared-data" && i + 1 < argc)
+      shared = argv[++i];
+    else if (a == "--dive" && i + 1 < argc)
+      dive_yaml = argv[++i];
+    else if (a == "--no-cross-pass")
+      cross_pass = false;
+    else if (a == "--monte-carlo-exact-camera")
+      mc_draw_focal = false;
+    else if (a == "--monte-carlo" && i + 1 < argc)
+      monte_carlo_runs = std::max(0, std::atoi(argv[++i]));
+    else if (a == "--monte-carlo-set" && i + 1 < argc)
+      monte_carlo_overrides.push_back(argv[++i]);
     else if (a == "--filter" && i + 1 < argc) {
       const std::string kv = argv[++i];
       const size_t eq = kv.find('=');
@@ -868,13 +877,13 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < pass_pairs.size(); i += 5) {  // one return frame a second
       const auto [ret, out] = pass_pairs[i];
       ++cross_attempts;
-      const CrossRegistration reg =
-          registerAcrossPasses(siftFeatures(d.gray[out]), siftFeatures(d.gray[ret]), d.gray[ret].cols, d.gray[ret].rows);
+      const CrossRegistration reg = registerAcrossPasses(siftFeatures(d.gray[out]), siftFeatures(d.gray[ret]),
+                                                         d.gray[ret].cols, d.gray[ret].rows);
       if (!reg.found) continue;
       if (!views[out] || !views[ret]) continue;
-      const fusion::MetricMotion m = fusion::toMetricMotion(registration::MotionModel::kHomography, reg.parameters,
-                                                            reg.covariance, reg.centre_px, mount, *views[out],
-                                                            *views[ret]);
+      const fusion::MetricMotion m =
+          fusion::toMetricMotion(registration::MotionModel::kHomography, reg.parameters, reg.covariance, reg.centre_px,
+                                 mount, *views[out], *views[ret]);
       if (!m.valid) continue;
       fusion::RelativeConstraint c;
       c.from_stamp_s = d.frame_stamps_s[out];
@@ -921,16 +930,15 @@ int main(int argc, char** argv) {
   if (monte_carlo_runs > 0) {
     // The Monte Carlo's sensors: the dive's, or changed from the command line (to find which sensor's model a
     // consistency problem comes from); the filter follows them.
-    const sim::DiveDescription mc_dive = monte_carlo_overrides.empty()
-                                             ? dive
-                                             : sim::loadDiveDescription(dive_yaml, monte_carlo_overrides);
+    const sim::DiveDescription mc_dive =
+        monte_carlo_overrides.empty() ? dive : sim::loadDiveDescription(dive_yaml, monte_carlo_overrides);
     const sim::DiveSynthesisConfig& sc = mc_dive.synthesis;
     fusion::FilterConfig mc_config;
     if (!configure(sc.navigation, &mc_config)) return 2;
     for (const std::string& o : monte_carlo_overrides) std::cout << "Monte Carlo sensors: " << o << "\n";
     const sim::VehicleTrajectory trajectory(sc.trajectory);
-    const double duration_s = sc.duration_s > 0.0 ? std::min(sc.duration_s, trajectory.duration_s())
-                                                  : trajectory.duration_s();
+    const double duration_s =
+        sc.duration_s > 0.0 ? std::min(sc.duration_s, trajectory.duration_s()) : trajectory.duration_s();
     const sim::Seabed seabed = sim::makeSeabed(dive.seabed, sc.seed);
     const sim::SeabedRelief* relief = seabed.relief.get();
     for (int run = 0; run < monte_carlo_runs; ++run) {
@@ -978,7 +986,7 @@ int main(int argc, char** argv) {
         ++mc_nees_count[k];
         const size_t a = k > 0 ? k - 1 : 0, b = std::min(n - 1, k + 1);
         const Eigen::Vector2d along = (truth[b] - truth[a]).norm() > 1e-9 ? (truth[b] - truth[a]).normalized().eval()
-                                                                         : Eigen::Vector2d::UnitX().eval();
+                                                                          : Eigen::Vector2d::UnitX().eval();
         const Eigen::Vector2d cross(-along.y(), along.x());
         mc_nees_along_sum[k] += std::pow(along.dot(e), 2) / along.dot(P * along);
         mc_nees_cross_sum[k] += std::pow(cross.dot(e), 2) / cross.dot(P * cross);
@@ -1033,21 +1041,22 @@ int main(int argc, char** argv) {
   };
 
   // ---- 10. Table ----
-  const double true_heading_error_end = std::remainder(
-      sim::rpyFromRotation(attitudeAt(d.imu, d.frame_stamps_s.back()).toRotationMatrix()).z() -
-          d.vehicle_yaw_rad.back(),
-      2.0 * M_PI);
+  const double true_heading_error_end =
+      std::remainder(sim::rpyFromRotation(attitudeAt(d.imu, d.frame_stamps_s.back()).toRotationMatrix()).z() -
+                         d.vehicle_yaw_rad.back(),
+                     2.0 * M_PI);
   // The better single source among the three the filter fuses: dead reckoning, USBL, the images.
   const double better_single = std::min({rmse_nav_only, rmse_usbl, rmse_image_only});
   const double updates_per_s = all.events / all.filter_seconds;
-  std::cout << "\nFusion, out-and-back over " << path_m << " m (" << n << " PAL frames at "
-            << rig.fps << " fps, mean GSD " << 1000.0 * gsd_mean << " mm), against the true camera centre:\n"
+  std::cout << "\nFusion, out-and-back over " << path_m << " m (" << n << " PAL frames at " << rig.fps
+            << " fps, mean GSD " << 1000.0 * gsd_mean << " mm), against the true camera centre:\n"
             << std::left << std::setw(44) << "track" << std::right << std::setw(11) << "RMSE m" << std::setw(15)
-            << "return med GSD" << std::setw(15) << "return p95 GSD" << "\n";
+            << "return med GSD" << std::setw(15) << "return p95 GSD"
+            << "\n";
   const auto row = [](const std::string& name, double r, const Misalignment& m) {
     std::ostringstream line;
-    line << std::left << std::setw(44) << name << std::right << std::fixed << std::setprecision(3) << std::setw(11)
-         << r << std::setprecision(1) << std::setw(15) << m.median_gsd << std::setw(15) << m.p95_gsd << "\n";
+    line << std::left << std::setw(44) << name << std::right << std::fixed << std::setprecision(3) << std::setw(11) << r
+         << std::setprecision(1) << std::setw(15) << m.median_gsd << std::setw(15) << m.p95_gsd << "\n";
     std::cout << line.str();
   };
   row("image motion alone (from the true start)", rmse_image_only, mis_image_only);
@@ -1075,21 +1084,21 @@ int main(int argc, char** argv) {
               << "  per axis (1 dof each): along-track mean " << mc_along_mean << ", "
               << 100.0 * mc_along_in / std::max(1, mc_epochs) << " % in bounds; cross-track mean " << mc_cross_mean
               << ", " << 100.0 * mc_cross_in / std::max(1, mc_epochs) << " % in bounds\n"
-              << "  error common to the runs (squared mean error / mean squared error): " << mc_common_fraction
-              << " (" << 1.0 / monte_carlo_runs << " for independent runs)\n";
+              << "  error common to the runs (squared mean error / mean squared error): " << mc_common_fraction << " ("
+              << 1.0 / monte_carlo_runs << " for independent runs)\n";
   }
   std::cout << "filtered / better single source: " << rmse_filtered / better_single << " (goal <= 0.5)\n"
-            << "NEES (filter, position, 2 dof): mean " << nees_sum / nees_count << ", "
-            << 100.0 * nees_in / nees_count << " % of " << nees_count << " epochs in [0.0506, 7.38] ("
-            << 100.0 * nees_below / nees_count << " % below, " << 100.0 * nees_above / nees_count
-            << " % above); smoothed mean " << smoothed_nees_sum / nees_count << "\n"
+            << "NEES (filter, position, 2 dof): mean " << nees_sum / nees_count << ", " << 100.0 * nees_in / nees_count
+            << " % of " << nees_count << " epochs in [0.0506, 7.38] (" << 100.0 * nees_below / nees_count
+            << " % below, " << 100.0 * nees_above / nees_count << " % above); smoothed mean "
+            << smoothed_nees_sum / nees_count << "\n"
             << "fixes: " << usbl_errors.size() << " (" << usbl_outliers << " outliers > 4 sigma), gated "
             << all.fixes_rejected_final << " (at arrival " << all.fixes_rejected_at_arrival << "), recoveries "
             << all.recoveries << "\n"
             << "heading error of the IMU at the end " << true_heading_error_end << " rad (truth); estimated "
-            << all.last.heading_error_rad << " +- "
-            << all.last.heading_error_sigma_rad << " rad, pixel-size correction " << all.last.pixel_size_correction
-            << " +- " << all.last.pixel_size_correction_sigma << "\n"
+            << all.last.heading_error_rad << " +- " << all.last.heading_error_sigma_rad
+            << " rad, pixel-size correction " << all.last.pixel_size_correction << " +- "
+            << all.last.pixel_size_correction_sigma << "\n"
             << "filter: " << all.events << " events in " << all.filter_seconds << " s (" << updates_per_s
             << " updates/s, " << all.rewinds << " rewinds); RTS over " << all.smoothed_states.size() << " steps in "
             << all.smoother_seconds << " s\n";

@@ -21,20 +21,20 @@
 #include <exocet_msgs/GeoDatum.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <tf2_msgs/TFMessage.h>
 #include <yaml-cpp/yaml.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/ros/dive_bag_writer.h"
 #include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_mosaic/sim/dive_import.h"
 #include "exocet_mosaic/sim/geo_reference.h"
-#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::DiveBagWriter;
@@ -49,7 +49,7 @@ constexpr int kSparusFrames = 22;
 constexpr int kSparusNavRows = 50;
 
 /// A fresh folder under the system's temporary folder, removed with everything in it.
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 void writeText(const std::string& path, const std::string& text) {
   std::ofstream out(path);
@@ -113,9 +113,11 @@ RunResult runTool(const std::vector<std::string>& args, const TempDir& scratch) 
 }
 
 std::vector<std::string> sparusArgs(const std::string& output) {
-  return {"--images", kSparus + "/frames",       "--image-times", kSparus + "/frames_index.csv",
-          "--nav",    kSparus + "/sparus_snippet.csv", "--camera",  kSparus + "/camera_intrinsics.yaml",
-          "--output", output};
+  return {"--images",      kSparus + "/frames",
+          "--image-times", kSparus + "/frames_index.csv",
+          "--nav",         kSparus + "/sparus_snippet.csv",
+          "--camera",      kSparus + "/camera_intrinsics.yaml",
+          "--output",      output};
 }
 
 /// Everything of interest in a dive bag.
@@ -222,8 +224,7 @@ void expectSparusBag(const std::string& path) {
   EXPECT_EQ(tf.transform.translation.x, 0.0);
   EXPECT_EQ(tf.transform.rotation.w, 1.0);
   // Written in time order, so that the bag plays back without seeking.
-  for (size_t i = 1; i < bag.record_times_s.size(); ++i)
-    EXPECT_LE(bag.record_times_s[i - 1], bag.record_times_s[i]);
+  for (size_t i = 1; i < bag.record_times_s.size(); ++i) EXPECT_LE(bag.record_times_s[i - 1], bag.record_times_s[i]);
 }
 
 /// Records what writeDiveImport writes, for tests that need no bag.
@@ -476,8 +477,7 @@ TEST(DiveImportFrames, IndexByFrameNumberAndRate) {
   writeText(dir / "short_index.csv", "file,t\nimg_0.png,100\nimg_2.png,101\n");
   expectImportError([&] { sim::frameTimesFromIndex(images, dir / "short_index.csv"); },
                     sim::DiveImportError::Kind::kInput, {"img_1.png", "has no row"});
-  expectImportError([&] { sim::frameTimesFromRate(images, 50.0, 0.0); }, sim::DiveImportError::Kind::kInput,
-                    {"--fps"});
+  expectImportError([&] { sim::frameTimesFromRate(images, 50.0, 0.0); }, sim::DiveImportError::Kind::kInput, {"--fps"});
 }
 
 // ------------------------------------------------------------------------------------------------------------
@@ -519,8 +519,7 @@ TEST_F(DiveImportErrors, MissingImagesFolder) {
   expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"--images", "does not exist"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
-  EXPECT_NE(run.err.find("--images: '" + dir_ / "no_such_folder" + "' does not exist"), std::string::npos)
-      << run.err;
+  EXPECT_NE(run.err.find("--images: '" + dir_ / "no_such_folder" + "' does not exist"), std::string::npos) << run.err;
   expectNoOutput();
 }
 
@@ -566,8 +565,7 @@ TEST_F(DiveImportErrors, NanOrGarbageInNav) {
     return out;
   });
   const auto args = replaceArg(args_, "--nav", nan_nav);
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput,
-                    {"line 7, column 'z'", "not finite"});
+  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"line 7, column 'z'", "not finite"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("line 7, column 'z'"), std::string::npos) << run.err;

@@ -69,8 +69,8 @@ void feedLevelSensors(FusionFrontEnd* front, double from_s, double to_s, double 
 TEST(FusionFrontEnd, TheFirstDeadReckoningStartsTheFilterAtTheCameraAndTheNextIsApplied) {
   FusionFrontEnd front = makeFrontEnd();
   feedLevelSensors(&front, 10.0, 12.0, M_PI / 2.0);  // facing north
-  const InputOutcome first = front.addDeadReckoning(10.0, Eigen::Vector3d(100.0, 200.0, -50.0),
-                                                    Eigen::Matrix2d::Identity() * 0.04);
+  const InputOutcome first =
+      front.addDeadReckoning(10.0, Eigen::Vector3d(100.0, 200.0, -50.0), Eigen::Matrix2d::Identity() * 0.04);
   EXPECT_EQ(first.started_from, "the dead reckoning");
   EXPECT_FALSE(first.update.has_value());
   ASSERT_TRUE(first.camera_en_m.has_value());
@@ -79,8 +79,8 @@ TEST(FusionFrontEnd, TheFirstDeadReckoningStartsTheFilterAtTheCameraAndTheNextIs
   EXPECT_NEAR(first.camera_en_m->y(), 200.5, 1e-9);
   EXPECT_TRUE(front.filter().initialized());
   EXPECT_NEAR(front.filter().current().position_covariance_m2(0, 0), 0.04, 1e-9);
-  const InputOutcome second = front.addDeadReckoning(11.0, Eigen::Vector3d(100.0, 201.0, -50.0),
-                                                     Eigen::Matrix2d::Identity() * 0.04);
+  const InputOutcome second =
+      front.addDeadReckoning(11.0, Eigen::Vector3d(100.0, 201.0, -50.0), Eigen::Matrix2d::Identity() * 0.04);
   ASSERT_TRUE(second.update.has_value());
   EXPECT_EQ(second.update->status, UpdateStatus::kApplied) << second.update->detail;
   EXPECT_TRUE(second.started_from.empty());
@@ -89,12 +89,12 @@ TEST(FusionFrontEnd, TheFirstDeadReckoningStartsTheFilterAtTheCameraAndTheNextIs
 TEST(FusionFrontEnd, AFixIsMovedFromTheTransponderToTheCameraAndStartsTheFilterOnlyWhenAllowed) {
   FusionFrontEnd front = makeFrontEnd();
   feedLevelSensors(&front, 0.0, 3.0, 0.0);  // facing east
-  const InputOutcome refused = front.addFix(1.0, Eigen::Vector2d(10.0, 20.0), Eigen::Matrix2d::Identity(), "usbl",
-                                            false);
+  const InputOutcome refused =
+      front.addFix(1.0, Eigen::Vector2d(10.0, 20.0), Eigen::Matrix2d::Identity(), "usbl", false);
   EXPECT_FALSE(front.filter().initialized());
   EXPECT_FALSE(refused.update.has_value());
-  const InputOutcome started = front.addFix(2.0, Eigen::Vector2d(10.0, 20.0), Eigen::Matrix2d::Identity(), "usbl",
-                                            true);
+  const InputOutcome started =
+      front.addFix(2.0, Eigen::Vector2d(10.0, 20.0), Eigen::Matrix2d::Identity(), "usbl", true);
   EXPECT_EQ(started.started_from, "the first fix");
   ASSERT_TRUE(started.camera_en_m.has_value());
   EXPECT_NEAR(started.camera_en_m->x(), 10.5, 1e-9);  // the camera is 0.5 m ahead (east); the transponder's height

@@ -8,8 +8,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 
+#include "exocet_common/geometry/fundamental_estimator.h"
 #include "exocet_mosaic/selfcal/feature_track_builder.h"
-#include "exocet_mosaic/selfcal/fundamental_estimator.h"
 #include "exocet_mosaic/selfcal/mendonca_cipolla_calibrator.h"
 #include "exocet_mosaic/selfcal/planar_self_calibrator.h"
 #include "exocet_mosaic/selfcal/planarity_test.h"

@@ -13,21 +13,21 @@
 #include <sys/stat.h>
 
 #include "compose_fixtures.h"
-#include "exocet_mosaic/testing/temp_dir.h"
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
 
 namespace et = exocet_mosaic::tiles;
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 namespace {
 
 constexpr double kGsd = 0.005;
 
 struct PlantedTile {
-  cv::Rect truth_px;         // the tile's pixels in the truth ortho-image
-  Eigen::Vector2d error_m;   // written georeference minus the true one
-  double rotation_rad = 0;   // the tile's content turned about its centre (counter-clockwise on the map)
+  cv::Rect truth_px;        // the tile's pixels in the truth ortho-image
+  Eigen::Vector2d error_m;  // written georeference minus the true one
+  double rotation_rad = 0;  // the tile's content turned about its centre (counter-clockwise on the map)
 
   /// Where the tile shows the seabed point that truly is at p (UTM), minus p.
   Eigen::Vector2d errorAt(const Eigen::Vector2d& p, const compose_test::TruthOrtho& truth) const {
@@ -53,7 +53,8 @@ std::vector<std::string> writeTiles(const compose_test::TruthOrtho& truth, const
     } else {
       // Content turned by +rotation on the map (north up, rows down): the tile pixel (u, v) shows the truth at the
       // centre plus the inverse rotation of (u, v) - centre.
-      const cv::Point2d centre(p.truth_px.x + 0.5 * p.truth_px.width - 0.5, p.truth_px.y + 0.5 * p.truth_px.height - 0.5);
+      const cv::Point2d centre(p.truth_px.x + 0.5 * p.truth_px.width - 0.5,
+                               p.truth_px.y + 0.5 * p.truth_px.height - 0.5);
       const double c = std::cos(p.rotation_rad), s = std::sin(p.rotation_rad);
       const double cu = 0.5 * p.truth_px.width - 0.5, cv_ = 0.5 * p.truth_px.height - 0.5;
       // map: truth (x, y) from tile (u, v): x - cx = c du - s dv' with dv' in map axes (y down flips the sign).
@@ -110,8 +111,8 @@ TEST(TilesAdjustment, OverlappingTilesAreMovedBackIntoAgreement) {
     // pairs with the turned tile (their offset varies across the overlap), are only printed.
     if (p.patch_px >= 256 && planted[p.a].rotation_rad == 0 && planted[p.b].rotation_rad == 0) {
       EXPECT_LT((p.offset_en_m - planted_offset).norm(), 0.2 * kGsd)
-        << "pair " << p.a << "-" << p.b << ": measured " << p.offset_en_m.transpose() << ", planted "
-        << planted_offset.transpose();
+          << "pair " << p.a << "-" << p.b << ": measured " << p.offset_en_m.transpose() << ", planted "
+          << planted_offset.transpose();
     }
     // After the adjustment the tiles agree everywhere in their overlap (the small overlaps weigh less): what remains
     // is the measurement noise.
@@ -146,7 +147,8 @@ TEST(TilesAdjustment, OverlappingTilesAreMovedBackIntoAgreement) {
     ASSERT_NE(moved->GetMetadataItem("EXOCET_ADJUSTMENT_E_M"), nullptr);
     EXPECT_NEAR(std::stod(moved->GetMetadataItem("EXOCET_ADJUSTMENT_E_M")), result.tiles[i].shift_en_m.x(), 1e-9);
     ASSERT_NE(moved->GetMetadataItem("EXOCET_ADJUSTMENT_ROTATION_RAD"), nullptr);
-    EXPECT_STREQ(moved->GetMetadataItem("EXOCET_POSITION_SIGMA_M"), original->GetMetadataItem("EXOCET_POSITION_SIGMA_M"));
+    EXPECT_STREQ(moved->GetMetadataItem("EXOCET_POSITION_SIGMA_M"),
+                 original->GetMetadataItem("EXOCET_POSITION_SIGMA_M"));
     EXPECT_STREQ(moved->GetMetadataItem("EXOCET_TILE_INDEX"), original->GetMetadataItem("EXOCET_TILE_INDEX"));
     // The world file beside it locates the centre of the top-left pixel.
     const std::string world = result.written[i].substr(0, result.written[i].size() - 4) + ".tfw";

@@ -31,8 +31,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
-#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::tiles::epsgForUtm;
@@ -45,7 +45,7 @@ using exocet_mosaic::tiles::WrittenTile;
 namespace {
 
 /// A fresh folder under /tmp, removed with its contents.
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 struct DatasetCloser {
   void operator()(GDALDataset* d) const {
@@ -561,8 +561,8 @@ TEST(TilesGeoTiff, OverviewsAverageTheDataAndIgnoreTheNoDataColour) {
           ++valid;
         }
       }
-      worst_alpha = std::max(worst_alpha, std::abs(levels[3].at<uchar>(y, x) - static_cast<int>(std::lround(
-                                                                                    255.0 * valid / 4.0))));
+      worst_alpha = std::max(worst_alpha,
+                             std::abs(levels[3].at<uchar>(y, x) - static_cast<int>(std::lround(255.0 * valid / 4.0))));
       if (valid == 0) continue;
       for (int c = 0; c < 3; ++c)
         worst_colour =

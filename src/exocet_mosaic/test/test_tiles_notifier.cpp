@@ -20,10 +20,10 @@
 #include <cpl_json.h>
 #include <opencv2/core.hpp>
 
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_json.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
-#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::tiles::GeoTiffTileWriter;
@@ -85,7 +85,7 @@ class UdpReceiver {
   int port_ = 0;
 };
 
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 /// A real tile (zone 56 S, Sydney) with COG and KMZ, so that every path is set.
 WrittenTile writeTile(const std::string& folder) {

@@ -10,9 +10,9 @@
 #include <Eigen/LU>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_stereo/io/mesh_export.h"
 #include "exocet_stereo/mesh/image_mesher.h"
-#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace fs = std::filesystem;
 namespace mesh = exocet_stereo::mesh;
@@ -25,7 +25,7 @@ constexpr int kWidth = 160;
 constexpr int kHeight = 120;
 
 /// Fresh empty folder under the temp dir, removed at the end of the test.
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 /// Sphere-cap mesh (analytic depth) with a random colour texture.
 mesh::TexturedMesh makeMesh() {

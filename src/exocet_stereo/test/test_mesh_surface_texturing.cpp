@@ -19,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/temp_dir.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
 #include "exocet_stereo/io/mesh_export.h"
@@ -26,7 +27,6 @@
 #include "exocet_stereo/mesh/cloud_fusion.h"
 #include "exocet_stereo/mesh/cloud_surface.h"
 #include "exocet_stereo/mesh/surface_texturing.h"
-#include "exocet_mosaic/testing/temp_dir.h"
 
 namespace {
 
@@ -43,7 +43,7 @@ double secondsSince(const std::chrono::steady_clock::time_point& start) {
 }
 
 /// Fresh empty folder under the temp dir, removed at the end of the test.
-using TempDir = exocet_mosaic::testing::TempDir;
+using TempDir = exocet_common::testing::TempDir;
 
 /// The vent without attenuation (its radiance is the same from every camera) seen by a ring of six 640x480 cameras;
 /// its surface from their exact depth maps; a seventh camera, between two of the ring and higher, is the ground truth.

@@ -9,8 +9,6 @@
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/TwistWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <rosbag/bag.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Imu.h>
@@ -18,9 +16,11 @@
 #include <sensor_msgs/Range.h>
 #include <sensor_msgs/image_encodings.h>
 #include <tf2_msgs/TFMessage.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/atomic_file.h"
 
 namespace exocet_mosaic {
 
@@ -99,8 +99,8 @@ sensor_msgs::CameraInfo toCameraInfo(const sim::CameraModel& c, double stamp_s, 
 }
 
 DiveBagWriter::DiveBagWriter(const std::string& final_path, const Options& options)
-    : final_path_(final_path), temporary_path_(sim::temporaryPathFor(final_path)), options_(options) {
-  const std::string problem = sim::checkWritableDestination(final_path);
+    : final_path_(final_path), temporary_path_(exocet_common::temporaryPathFor(final_path)), options_(options) {
+  const std::string problem = exocet_common::checkWritableDestination(final_path);
   if (!problem.empty()) throw std::runtime_error("cannot write bag '" + final_path + "': " + problem);
   if (options_.jpeg_quality < 1 || options_.jpeg_quality > 100)
     throw std::invalid_argument("jpeg_quality " + std::to_string(options_.jpeg_quality) + " out of range [1, 100]");
@@ -219,8 +219,7 @@ void DiveBagWriter::writeImu(const sim::ImuRecord& imu) {
   for (int i = 0; i < 3; ++i) {
     m.orientation_covariance[i * 4] = imu.orientation_sigma_rad * imu.orientation_sigma_rad;
     m.angular_velocity_covariance[i * 4] = imu.angular_velocity_sigma_rps * imu.angular_velocity_sigma_rps;
-    m.linear_acceleration_covariance[i * 4] =
-        imu.linear_acceleration_sigma_mps2 * imu.linear_acceleration_sigma_mps2;
+    m.linear_acceleration_covariance[i * 4] = imu.linear_acceleration_sigma_mps2 * imu.linear_acceleration_sigma_mps2;
   }
   write(topics::kNavImu, imu.stamp_s, m);
 }
@@ -285,7 +284,7 @@ void DiveBagWriter::commit() {
   } catch (const std::exception& e) {
     throw std::runtime_error("cannot finish bag '" + final_path_ + "': " + e.what());
   }
-  sim::commitTemporaryFile(temporary_path_, final_path_);
+  exocet_common::commitTemporaryFile(temporary_path_, final_path_);
   committed_ = true;
 }
 

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_mosaic {
 
@@ -11,7 +11,7 @@ namespace {
 
 /// ~filter/...: the Kalman filter's noise, gating and history (fusion/navigation_filter.h documents each).
 void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f) {
-  const ParameterReader p(filter_nh);
+  const exocet_common::ParameterReader p(filter_nh);
   p.readDouble("position_noise_m2_per_s", &f->position_noise_m2_per_s, 0.0, 100.0,
                "position random walk with image motion (m^2/s)");
   p.readDouble("image_step_noise_along_m", &f->image_step_noise_along_m, 0.0, 10.0,
@@ -62,7 +62,7 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
 
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   FusionNodeConfig c;
-  const ParameterReader params(private_nh);
+  const exocet_common::ParameterReader params(private_nh);
   readFilterConfig(ros::NodeHandle(private_nh, "filter"), &c.filter);
 
   for (auto [name, topic] :

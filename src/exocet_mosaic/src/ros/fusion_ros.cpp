@@ -7,8 +7,9 @@
 
 #include <geometry_msgs/TransformStamped.h>
 
+#include "exocet_common/atomic_file.h"
+#include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
-#include "exocet_mosaic/sim/atomic_file.h"
 
 namespace exocet_mosaic {
 
@@ -25,10 +26,9 @@ bool validCovariance(const Eigen::Matrix2d& c) {
 
 Eigen::Quaterniond toEigen(const geometry_msgs::Quaternion& q) { return Eigen::Quaterniond(q.w, q.x, q.y, q.z); }
 
-/// A usable orientation: finite and of unit norm within 1% (a zero quaternion means "no orientation").
+/// A usable orientation (a zero quaternion means "no orientation").
 bool validOrientation(const geometry_msgs::Quaternion& q) {
-  const Eigen::Quaterniond e = toEigen(q);
-  return e.coeffs().allFinite() && std::abs(e.norm() - 1.0) < 0.01;
+  return exocet_common::isUnitQuaternion(q.w, q.x, q.y, q.z);
 }
 
 /// ENU yaw (counter-clockwise from east) from a grid heading (clockwise from north).
@@ -37,10 +37,7 @@ double enuYawFromHeading_rad(double heading_rad) { return M_PI / 2.0 - heading_r
 }  // namespace
 
 FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
-    : nh_(nh),
-      private_nh_(private_nh),
-      config_(readFusionNodeConfig(private_nh)),
-      tf_listener_(tf_buffer_) {
+    : nh_(nh), private_nh_(private_nh), config_(readFusionNodeConfig(private_nh)), tf_listener_(tf_buffer_) {
   fu::FusionFrontEndConfig front_end;
   front_end.filter = config_.filter;
   front_end.keep_log = config_.keep_smoother_log;
@@ -50,7 +47,8 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   front_end.altimeter_sigma_m = config_.altimeter_sigma_m;
   front_end.base_frame = config_.base_frame;
   front_end.default_camera_frame = config_.camera_frame;
-  front_end_ = std::make_unique<fu::FusionFrontEnd>(front_end, [this](const std::string& frame) { return mountOf(frame); });
+  front_end_ =
+      std::make_unique<fu::FusionFrontEnd>(front_end, [this](const std::string& frame) { return mountOf(frame); });
   if (config_.utm_zone > 0) {
     grid_ = fu::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
     grid_source_ = "parameter ~utm_zone";
@@ -94,9 +92,10 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
   initializeFromParameters();
   if (config_.view_half_window_s > config_.reorder_delay_s)
-    ROS_WARN("fusion: ~view_half_window_s (%.2f s) is longer than ~reorder_delay_s (%.2f s): an image's view is fitted "
-             "before its window's later samples arrive",
-             config_.view_half_window_s, config_.reorder_delay_s);
+    ROS_WARN(
+        "fusion: ~view_half_window_s (%.2f s) is longer than ~reorder_delay_s (%.2f s): an image's view is fitted "
+        "before its window's later samples arrive",
+        config_.view_half_window_s, config_.reorder_delay_s);
   reconfigure_server_ =
       std::make_unique<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>>(reconfigure_mutex_, private_nh_);
   exocet_mosaic::FusionConfig start;
@@ -264,8 +263,7 @@ bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
     if (front_end_->filter().initialized()) {
       // Re-seeding during a dive: start again from the given point at the newest stamp.
       front_end_->filter().reset();
-      front_end_->initialize(newest_stamp_s_, en,
-                             Eigen::Matrix2d::Identity() * std::pow(request.position_sigma_m, 2));
+      front_end_->initialize(newest_stamp_s_, en, Eigen::Matrix2d::Identity() * std::pow(request.position_sigma_m, 2));
       onStarted("~set_initial_pose");
     }
     what << std::fixed << std::setprecision(2) << "position E " << en.x() << " N " << en.y() << " (1-sigma "
@@ -710,9 +708,10 @@ void FusionRos::writeTracks() {
     std::vector<fu::FilterState> filtered;
     for (const fu::FilterStep& step : front_end_->filter().log().steps)
       filtered.push_back(fu::FilterState::from(step.stamp_s, step.x_posterior, step.P_posterior));
-    if (!config_.track_csv.empty()) sim::writeFileAtomically(config_.track_csv, trackCsv(filtered));
+    if (!config_.track_csv.empty()) exocet_common::writeFileAtomically(config_.track_csv, trackCsv(filtered));
     if (!config_.smoothed_track_csv.empty())
-      sim::writeFileAtomically(config_.smoothed_track_csv, trackCsv(fu::smoothRts(front_end_->filter().log())));
+      exocet_common::writeFileAtomically(config_.smoothed_track_csv,
+                                         trackCsv(fu::smoothRts(front_end_->filter().log())));
     ROS_INFO("fusion: wrote %zu states to %s %s", filtered.size(), config_.track_csv.c_str(),
              config_.smoothed_track_csv.c_str());
   } catch (const std::exception& e) {

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_mosaic {
 
@@ -16,7 +16,7 @@ bool finitePose(const geometry_msgs::Pose& p) {
 
 OdometryPathConfig readOdometryPathConfig(const ros::NodeHandle& private_nh) {
   OdometryPathConfig c;
-  const ParameterReader params(private_nh);
+  const exocet_common::ParameterReader params(private_nh);
   params.readTopic("odometry_topic", &c.odometry_topic);
   params.readTopic("path_topic", &c.path_topic);
   params.readDouble("min_spacing_m", &c.min_spacing_m, 0.0, 1000.0,

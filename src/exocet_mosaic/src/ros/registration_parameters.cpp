@@ -3,7 +3,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_mosaic {
 namespace {
@@ -13,7 +13,7 @@ constexpr int kAnyInt = std::numeric_limits<int>::max();
 
 // Types are checked here; ranges by the configs' validate(), which names each field's allowed range.
 struct SectionReader {
-  const ParameterReader& reader;
+  const exocet_common::ParameterReader& reader;
   std::string section;
   void number(const std::string& field, double* v) const {
     reader.readDouble(section + "/" + field, v, -kAny, kAny, "see " + section + " in config/registration/README.md");
@@ -107,7 +107,7 @@ void readRmr(const SectionReader& s, registration::RmrConfig* c) {
 
 registration::RegistrationConfig readRegistrationConfig(const ros::NodeHandle& private_nh) {
   namespace reg = registration;
-  const ParameterReader reader(private_nh);
+  const exocet_common::ParameterReader reader(private_nh);
   reg::RegistrationConfig config;
   std::string method = reg::toString(config.method), model = reg::toString(config.model);
   reader.readString("method", &method, {"klt", "rmr", "auto"},

@@ -11,8 +11,8 @@
 #include <image_transport/camera_common.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/ros/parameter_reader.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
-#include "exocet_mosaic/ros/parameter_reader.h"
 #include "exocet_mosaic/ros/registration_parameters.h"
 
 namespace exocet_mosaic {
@@ -23,7 +23,7 @@ namespace reg = registration;
 RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private_nh) {
   RegistrationNodeConfig config;
   config.registration = readRegistrationConfig(private_nh);
-  const ParameterReader params(private_nh);
+  const exocet_common::ParameterReader params(private_nh);
   params.readTopic("image_topic", &config.image_topic);
   params.readString("transport", &config.transport, {"auto", "raw", "compressed"},
                     "which image topic to listen to: raw (image_transport), compressed (<image_topic>/compressed, "

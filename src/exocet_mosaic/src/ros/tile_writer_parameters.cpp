@@ -4,13 +4,13 @@
 
 #include <image_transport/camera_common.h>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_mosaic {
 
 namespace {
 
-void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
+void readComposer(const exocet_common::ParameterReader& p, compose::ComposerConfig* c) {
   p.readInt("frames_per_mosaic", &c->frames_per_mosaic, 2, 100000, "images per mosaic before it is closed");
   p.readDouble("gsd_m", &c->gsd_m, 0.0, 100.0,
                "pixel size of the tiles (m), 0: native, rounded down to a preferred number (ISO 3 R'10)");
@@ -42,7 +42,7 @@ void readComposer(const ParameterReader& p, compose::ComposerConfig* c) {
   if (!error.empty()) throw std::invalid_argument("tile writer parameters: " + error);
 }
 
-void readFiles(const ParameterReader& p, tiles::TileWriterConfig* c) {
+void readFiles(const exocet_common::ParameterReader& p, tiles::TileWriterConfig* c) {
   p.readOptionalString("output_dir", &c->output_dir, "folder of the GeoTIFF tiles (must exist)");
   if (c->output_dir.empty())
     throw std::invalid_argument("parameter ~output_dir is required: the folder where the tiles are written");
@@ -61,7 +61,7 @@ void readFiles(const ParameterReader& p, tiles::TileWriterConfig* c) {
 
 TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh) {
   TileWriterNodeConfig c;
-  const ParameterReader p(private_nh);
+  const exocet_common::ParameterReader p(private_nh);
   readComposer(p, &c.composer);
   readFiles(p, &c.files);
   p.readTopic("image_topic", &c.image_topic);

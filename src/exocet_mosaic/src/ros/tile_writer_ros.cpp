@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
 
 namespace exocet_mosaic {
@@ -231,8 +232,8 @@ void TileWriterRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
   pose.position_cov_m2 << c[0], c[1], c[6], c[7];
   const auto& q = msg->pose.pose.orientation;
   pose.world_from_camera = Eigen::Quaterniond(q.w, q.x, q.y, q.z);
-  const double norm = pose.world_from_camera.norm();
-  if (!finite(pose.camera_en_m) || !finite(pose.position_cov_m2) || !(std::abs(norm - 1.0) < 1e-3)) {
+  if (!finite(pose.camera_en_m) || !finite(pose.position_cov_m2) ||
+      !exocet_common::isUnitQuaternion(q.w, q.x, q.y, q.z)) {
     reject(
         "fused odometry with a non-finite position or covariance, or an orientation that is not a unit "
         "quaternion: ignored");

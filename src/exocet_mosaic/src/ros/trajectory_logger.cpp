@@ -23,7 +23,8 @@
 #include <ros/names.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
-#include "exocet_mosaic/sim/atomic_file.h"
+#include "exocet_common/atomic_file.h"
+#include "exocet_common/ros/parameter_reader.h"
 #include "exocet_mosaic/sim/geo_reference.h"
 
 namespace exocet_mosaic {
@@ -127,65 +128,19 @@ double horizontalSigma_m(double var_e_m2, double var_n_m2) {
 
 // ---- Parameters -------------------------------------------------------------------------------------------------
 
-std::string describe(const ros::NodeHandle& nh, const std::string& name) {
-  return "parameter ~" + name + " (" + nh.resolveName(name) + ")";
-}
-
-std::string valueText(XmlRpc::XmlRpcValue& raw) {
-  std::ostringstream text;
-  text << raw;
-  return text.str();
-}
-
-bool readDouble(const ros::NodeHandle& nh, const std::string& name, double* value) {
-  XmlRpc::XmlRpcValue raw;
-  if (!nh.getParam(name, raw)) return false;
-  if (raw.getType() == XmlRpc::XmlRpcValue::TypeDouble) {
-    *value = static_cast<double>(raw);
-  } else if (raw.getType() == XmlRpc::XmlRpcValue::TypeInt) {
-    *value = static_cast<int>(raw);
-  } else {
-    throw std::invalid_argument(describe(nh, name) + " must be a number of seconds, got '" + valueText(raw) + "'");
-  }
-  return true;
-}
-
-bool readString(const ros::NodeHandle& nh, const std::string& name, std::string* value) {
-  XmlRpc::XmlRpcValue raw;
-  if (!nh.getParam(name, raw)) return false;
-  if (raw.getType() != XmlRpc::XmlRpcValue::TypeString)
-    throw std::invalid_argument(describe(nh, name) + " must be a string, got '" + valueText(raw) + "'");
-  *value = static_cast<std::string>(raw);
-  return true;
-}
-
-void readTopic(const ros::NodeHandle& nh, const std::string& name, std::string* topic) {
-  readString(nh, name, topic);
-  std::string why;
-  if (topic->empty() || !ros::names::validate(*topic, why))
-    throw std::invalid_argument(describe(nh, name) + " '" + *topic + "' is not a valid topic name" +
-                                (why.empty() ? std::string() : ": " + why));
-}
-
 }  // namespace
 
 TrajectoryLoggerConfig readTrajectoryLoggerConfig(const ros::NodeHandle& private_nh) {
   TrajectoryLoggerConfig config;
-  if (!readString(private_nh, "output_dir", &config.output_dir) || config.output_dir.empty())
-    throw std::invalid_argument(describe(private_nh, "output_dir") +
-                                " is required: the folder where the trajectory CSV files are written");
-  if (readDouble(private_nh, "flush_period_s", &config.flush_period_s) &&
-      !(config.flush_period_s > 0.0 && config.flush_period_s <= 60.0))
-    throw std::invalid_argument(describe(private_nh, "flush_period_s") + " = " + formatNumber(config.flush_period_s) +
-                                " s is out of range (0, 60]: the wall-clock period between writes to disk");
-  readTopic(private_nh, "ground_truth_topic", &config.ground_truth_topic);
-  readTopic(private_nh, "navigation_topic", &config.navigation_topic);
-  readTopic(private_nh, "usbl_topic", &config.usbl_topic);
-  readTopic(private_nh, "datum_topic", &config.datum_topic);
-  readString(private_nh, "utm_frame", &config.utm_frame);
-  if (config.utm_frame.empty())
-    throw std::invalid_argument(describe(private_nh, "utm_frame") +
-                                " is empty: it must name the UTM frame of the odometry, normally 'utm'");
+  const exocet_common::ParameterReader params(private_nh);
+  params.readRequiredString("output_dir", &config.output_dir, "the folder where the trajectory CSV files are written");
+  params.readPositiveDouble("flush_period_s", &config.flush_period_s, 60.0,
+                            "the wall-clock period between writes to disk (s)");
+  params.readTopic("ground_truth_topic", &config.ground_truth_topic);
+  params.readTopic("navigation_topic", &config.navigation_topic);
+  params.readTopic("usbl_topic", &config.usbl_topic);
+  params.readTopic("datum_topic", &config.datum_topic);
+  params.readString("utm_frame", &config.utm_frame, {}, "the UTM frame of the odometry, normally 'utm'");
   return config;
 }
 
@@ -329,15 +284,15 @@ TrajectoryLogger::TrajectoryLogger(ros::NodeHandle nh, ros::NodeHandle private_n
   std::error_code error;
   fs::create_directories(config_.output_dir, error);
   if (error)
-    throw std::runtime_error(describe(private_nh_, "output_dir") + ": cannot create folder '" + config_.output_dir +
-                             "': " + error.message());
+    throw std::runtime_error(exocet_common::ParameterReader(private_nh_).describe("output_dir") +
+                             ": cannot create folder '" + config_.output_dir + "': " + error.message());
   output_dir_abs_ = fs::absolute(config_.output_dir, error).lexically_normal().string();
   if (error) output_dir_abs_ = config_.output_dir;
   try {
     current_set_ = openFileSet(1);
   } catch (const std::exception& e) {
-    throw std::runtime_error(describe(private_nh_, "output_dir") + " '" + output_dir_abs_ +
-                             "' is not writable: " + e.what());
+    throw std::runtime_error(exocet_common::ParameterReader(private_nh_).describe("output_dir") + " '" +
+                             output_dir_abs_ + "' is not writable: " + e.what());
   }
   if (current_set_->index > 1)
     ROS_WARN(
@@ -605,7 +560,7 @@ void TrajectoryLogger::writeDatumFile(FileSet* set) {
                            ",\n  \"origin_easting_m\": " + formatNumber(d.origin_easting_m) +
                            ",\n  \"origin_northing_m\": " + formatNumber(d.origin_northing_m) + "\n}\n";
   try {
-    sim::writeFileAtomically(set->datum_path, json);
+    exocet_common::writeFileAtomically(set->datum_path, json);
     set->datum_written = true;
   } catch (const std::exception& e) {
     noteWriteError(set->datum_path, e.what());

@@ -6,10 +6,10 @@
 #include <sstream>
 #include <stdexcept>
 
-#include <Eigen/LU>
 #include <yaml-cpp/yaml.h>
+#include <Eigen/LU>
 
-#include "exocet_mosaic/sim/atomic_file.h"
+#include "exocet_common/atomic_file.h"
 
 namespace exocet_mosaic {
 namespace sim {
@@ -53,8 +53,10 @@ Eigen::Vector2d CameraModel::undistortNormalized(const Eigen::Vector2d& xy_disto
     if (f.squaredNorm() < 1e-26) break;
     const double h = 1e-7;
     Eigen::Matrix2d J;
-    J.col(0) = (distortNormalized(xy + Eigen::Vector2d(h, 0)) - distortNormalized(xy - Eigen::Vector2d(h, 0))) / (2 * h);
-    J.col(1) = (distortNormalized(xy + Eigen::Vector2d(0, h)) - distortNormalized(xy - Eigen::Vector2d(0, h))) / (2 * h);
+    J.col(0) =
+        (distortNormalized(xy + Eigen::Vector2d(h, 0)) - distortNormalized(xy - Eigen::Vector2d(h, 0))) / (2 * h);
+    J.col(1) =
+        (distortNormalized(xy + Eigen::Vector2d(0, h)) - distortNormalized(xy - Eigen::Vector2d(0, h))) / (2 * h);
     xy -= J.inverse() * f;
   }
   return xy;
@@ -161,7 +163,7 @@ void saveCameraModelYaml(const std::string& path, const CameraModel& c, const st
   out << "]\nrectification_matrix:\n  rows: 3\n  cols: 3\n  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n";
   out << "projection_matrix:\n  rows: 3\n  cols: 4\n  data: [" << c.fx << ", 0, " << c.cx << ", 0, 0, " << c.fy << ", "
       << c.cy << ", 0, 0, 0, 1, 0]\n";
-  writeFileAtomically(path, out.str());
+  exocet_common::writeFileAtomically(path, out.str());
 }
 
 }  // namespace sim

@@ -21,8 +21,9 @@
 #include <opencv2/imgproc.hpp>
 
 // Frame names only (constexpr strings, no ROS dependency), so that the importer and the bag agree on them.
+#include "exocet_common/atomic_file.h"
+#include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/atomic_file.h"
 #include "exocet_mosaic/sim/geo_reference.h"
 
 namespace exocet_mosaic {
@@ -121,8 +122,8 @@ struct CsvRow {
 
 struct CsvTable {
   std::string path;
-  std::string option;               // the command-line option that named the file, for messages
-  std::vector<std::string> names;   // header, trimmed and lower-cased
+  std::string option;              // the command-line option that named the file, for messages
+  std::vector<std::string> names;  // header, trimmed and lower-cased
   std::vector<std::string> raw_names;
   std::vector<CsvRow> rows;
 
@@ -222,8 +223,8 @@ CsvTable readCsv(const std::string& option, const std::string& path, const std::
           failInput(option + ": " + path + ": line " + std::to_string(line_number) + ": header column " +
                     std::to_string(i + 1) + " has no name");
         if (!seen.insert(table.names[i]).second)
-          failInput(option + ": " + path + ": line " + std::to_string(line_number) + ": column '" +
-                    table.raw_names[i] + "' appears twice in the header");
+          failInput(option + ": " + path + ": line " + std::to_string(line_number) + ": column '" + table.raw_names[i] +
+                    "' appears twice in the header");
       }
       continue;
     }
@@ -379,8 +380,8 @@ Eigen::Isometry3d parseCameraPose(const std::string& text) {
 
 DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args) {
   static const std::set<std::string> kValueOptions = {
-      "--images",   "--nav",        "--camera",     "--output",   "--image-times",   "--start-time",
-      "--fps",      "--origin-lat", "--origin-lon", "--encoding", "--image-storage", "--camera-pose"};
+      "--images", "--nav",        "--camera",     "--output",   "--image-times",   "--start-time",
+      "--fps",    "--origin-lat", "--origin-lon", "--encoding", "--image-storage", "--camera-pose"};
   std::map<std::string, std::string> values;
   for (size_t i = 0; i < args.size(); ++i) {
     std::string name = args[i];
@@ -416,10 +417,8 @@ DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args)
     if (out->empty()) failInput(name + " has an empty value");
     return true;
   };
-  const std::vector<std::pair<std::string, std::string*>> required = {{"--images", &o.images_path},
-                                                                        {"--nav", &o.nav_path},
-                                                                        {"--camera", &o.camera_path},
-                                                                        {"--output", &o.output_path}};
+  const std::vector<std::pair<std::string, std::string*>> required = {
+      {"--images", &o.images_path}, {"--nav", &o.nav_path}, {"--camera", &o.camera_path}, {"--output", &o.output_path}};
   for (const auto& [name, out] : required)
     if (!take(name, out)) failInput("missing required option " + name + " (see --help)");
   take("--image-times", &o.image_times_path);
@@ -601,7 +600,7 @@ NavigationTable readNavigationCsv(const std::string& path, const std::optional<G
     if (has_quaternion) {
       const Eigen::Quaterniond q(table.number(row, c_q[3]), table.number(row, c_q[0]), table.number(row, c_q[1]),
                                  table.number(row, c_q[2]));
-      if (std::abs(q.norm() - 1.0) > 0.01)
+      if (!exocet_common::isUnitQuaternion(q.w(), q.x(), q.y(), q.z()))
         failInput(table.where(row) + ": quaternion (qx, qy, qz, qw) has norm " + formatNumber(q.norm()) +
                   "; expected 1 (within 1%)");
       out.pose.orientation = q.normalized();
@@ -669,8 +668,7 @@ ImageSource listImages(const std::string& path) {
       names.push_back(name);
     }
     ::closedir(dir);
-    if (names.empty())
-      failInput("--images: folder '" + path + "' has no images (" + join(extensions, " ") + ")");
+    if (names.empty()) failInput("--images: folder '" + path + "' has no images (" + join(extensions, " ") + ")");
     std::sort(names.begin(), names.end());
     const std::string prefix = path.back() == '/' ? path : path + "/";
     for (const auto& name : names) source.files.push_back(prefix + name);
@@ -862,15 +860,15 @@ DiveImport prepareDiveImport(const DiveImportOptions& options) {
   if (!options.image_times_path.empty()) {
     dive.times = frameTimesFromIndex(dive.images, options.image_times_path);
     if (dive.times.unused_index_rows > 0)
-      dive.warnings.push_back(std::to_string(dive.times.unused_index_rows) + " row(s) of '" +
-                              options.image_times_path + "' name no image of '" + options.images_path + "'");
+      dive.warnings.push_back(std::to_string(dive.times.unused_index_rows) + " row(s) of '" + options.image_times_path +
+                              "' name no image of '" + options.images_path + "'");
   } else {
     dive.times = frameTimesFromRate(dive.images, options.start_time_s.value_or(0.0), options.fps.value_or(0.0));
   }
   dive.navigation = readNavigationCsv(options.nav_path, options.origin);
   if (pathType(options.output_path) == PathType::kFolder)
     failInput("--output: '" + options.output_path + "' is a folder; give the bag's file name");
-  const std::string problem = checkWritableDestination(options.output_path);
+  const std::string problem = exocet_common::checkWritableDestination(options.output_path);
   if (!problem.empty()) failInput("--output: cannot write '" + options.output_path + "': " + problem);
   StaticTransform camera_mount;
   camera_mount.parent_frame = frames::kBaseLink;

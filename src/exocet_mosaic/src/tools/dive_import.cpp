@@ -1,5 +1,6 @@
 // dive_import: images + navigation CSV + camera intrinsics -> a dive bag with the simulator's layout.
-// Usage and conventions: dive_import --help (text in sim/dive_import.cpp), README.md (section "Importing a real dive: dive_import").
+// Usage and conventions: dive_import --help (text in sim/dive_import.cpp), README.md (section "Importing a real dive:
+// dive_import").
 
 #include <csignal>
 #include <iostream>

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/ros/dive_bag_writer.h"
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/atomic_file.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/geo_reference.h"
 #include "exocet_mosaic/sim/image_seabed.h"
@@ -26,7 +26,8 @@ void onSignal(int) { g_interrupted = true; }
 
 struct Interrupted {};
 
-const char* kUsage = R"(dive_synth: synthesize a dive (downward camera over a seabed, navigation sensors, ground truth) into a bag.
+const char* kUsage =
+    R"(dive_synth: synthesize a dive (downward camera over a seabed, navigation sensors, ground truth) into a bag.
 
 Usage: dive_synth [--config DIVE.yaml] --output OUT.bag [options]
 
@@ -102,9 +103,10 @@ int run(int argc, char** argv) {
     } else if (a == "--seabed-pixel-size") {
       overrides.push_back("seabed.image_pixel_size_m=" + value("--seabed-pixel-size"));
     } else if (a == "--ideal") {
-      for (const char* o : {"imaging.light_cone_strength=0", "imaging.vignetting=0", "imaging.attenuation_per_m=[0,0,0]",
-                            "imaging.backscatter=0", "imaging.noise_sigma_dn=0", "imaging.shot_noise_dn=0",
-                            "imaging.marine_snow_per_m3=0", "imaging.motion_blur_exposure_s=0", "imaging.segments=[]"})
+      for (const char* o :
+           {"imaging.light_cone_strength=0", "imaging.vignetting=0", "imaging.attenuation_per_m=[0,0,0]",
+            "imaging.backscatter=0", "imaging.noise_sigma_dn=0", "imaging.shot_noise_dn=0",
+            "imaging.marine_snow_per_m3=0", "imaging.motion_blur_exposure_s=0", "imaging.segments=[]"})
         overrides.push_back(o);
     } else if (a == "--encoding") {
       overrides.push_back("camera.encoding=" + value("--encoding"));
@@ -132,7 +134,7 @@ int run(int argc, char** argv) {
   if (output.size() < 5 || output.substr(output.size() - 4) != ".bag")
     throw std::invalid_argument("--output '" + output + "' must end in .bag");
   const std::string base = output.substr(0, output.size() - 4);
-  const std::string writable = checkWritableDestination(output);
+  const std::string writable = exocet_common::checkWritableDestination(output);
   if (!writable.empty()) throw std::runtime_error(writable);
 
   Seabed seabed = makeSeabed(dive.seabed, dive.synthesis.seed);
@@ -142,8 +144,9 @@ int run(int argc, char** argv) {
     // A picture ends somewhere: refuse a dive that would film past its edge rather than render filler.
     for (double t = 0.0; t <= synth.duration_s() + 1e-9; t += 0.5) {
       if (!picture->covers(synth.footprintOnReferencePlane(t)))
-        throw std::invalid_argument("the camera leaves the seabed image '" + dive.seabed.image + "' at t = " +
-                                    std::to_string(t) + " s: enlarge seabed.image_pixel_size_m, move "
+        throw std::invalid_argument("the camera leaves the seabed image '" + dive.seabed.image +
+                                    "' at t = " + std::to_string(t) +
+                                    " s: enlarge seabed.image_pixel_size_m, move "
                                     "seabed.image_center_x_m/_y_m or shorten the trajectory");
     }
   }
@@ -196,8 +199,8 @@ int run(int argc, char** argv) {
     if (!quiet && (percent / 10 != last_percent / 10 || done == total)) {
       last_percent = percent;
       const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      std::cerr << "dive_synth: " << done << "/" << total << " frames (" << percent << "%), "
-                << std::setprecision(3) << done / std::max(s, 1e-9) << " frames/s\n";
+      std::cerr << "dive_synth: " << done << "/" << total << " frames (" << percent << "%), " << std::setprecision(3)
+                << done / std::max(s, 1e-9) << " frames/s\n";
     }
   };
   synth.run(sink);
@@ -211,16 +214,16 @@ int run(int argc, char** argv) {
               << csvNumber(w.y(), 4) << ',' << csvNumber(w.z(), 4) << ',' << csvNumber(ll.x(), 9) << ','
               << csvNumber(ll.y(), 9) << ',' << csvNumber(m.size_m, 3) << '\n';
   }
-  writeFileAtomically(base + ".ground_truth.csv", truth_csv.str());
-  writeFileAtomically(base + ".landmarks.csv", marks_csv.str());
-  writeFileAtomically(base + ".config.yaml", "# Written by dive_synth: the complete description of " + output +
-                                                 "\n# Reproduce with: dive_synth --config THIS_FILE --output OUT.bag\n" +
-                                                 toYaml(dive));
+  exocet_common::writeFileAtomically(base + ".ground_truth.csv", truth_csv.str());
+  exocet_common::writeFileAtomically(base + ".landmarks.csv", marks_csv.str());
+  exocet_common::writeFileAtomically(
+      base + ".config.yaml", "# Written by dive_synth: the complete description of " + output +
+                                 "\n# Reproduce with: dive_synth --config THIS_FILE --output OUT.bag\n" + toYaml(dive));
   writer.commit();
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::cout << "dive_synth: wrote " << output << " (" << synth.frameCount() << " frames, "
-            << std::setprecision(4) << synth.duration_s() << " s of dive, " << writer.messageCount()
-            << " messages, EPSG:" << cfg.geo.epsg << ") in " << std::setprecision(3) << s << " s\n";
+  std::cout << "dive_synth: wrote " << output << " (" << synth.frameCount() << " frames, " << std::setprecision(4)
+            << synth.duration_s() << " s of dive, " << writer.messageCount() << " messages, EPSG:" << cfg.geo.epsg
+            << ") in " << std::setprecision(3) << s << " s\n";
   return 0;
 }
 

@@ -22,9 +22,9 @@
 #include <sensor_msgs/Image.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/registration/gray_converter.h"
 #include "exocet_mosaic/selfcal/self_calibration.h"
-#include "exocet_mosaic/sim/atomic_file.h"
 #include "exocet_mosaic/sim/camera_model.h"
 
 namespace {
@@ -239,7 +239,7 @@ void writeCalibration(const Options& o, const selfcal::SelfCalibrationResult& re
   camera.cx = result.intrinsics.value.u0;
   camera.cy = result.intrinsics.value.v0;
   // The standard file first (through the project's writer), then our keys appended, then one atomic rename.
-  const std::string temporary = sim::temporaryPathFor(o.output) + ".base";
+  const std::string temporary = exocet_common::temporaryPathFor(o.output) + ".base";
   sim::saveCameraModelYaml(temporary, camera, o.camera_name);
   std::ifstream in(temporary);
   std::stringstream text;
@@ -247,7 +247,7 @@ void writeCalibration(const Options& o, const selfcal::SelfCalibrationResult& re
   in.close();
   std::error_code ignored;
   std::filesystem::remove(temporary, ignored);
-  sim::writeFileAtomically(o.output, text.str() + selfcal::selfCalibrationYamlBlock(result));
+  exocet_common::writeFileAtomically(o.output, text.str() + selfcal::selfCalibrationYamlBlock(result));
 }
 
 }  // namespace
@@ -261,7 +261,7 @@ int main(int argc, char** argv) {
   }
   try {
     const Options o = parseOptions(argc, argv);
-    const std::string destination_problem = sim::checkWritableDestination(o.output);
+    const std::string destination_problem = exocet_common::checkWritableDestination(o.output);
     if (!destination_problem.empty()) throw BadInput("--output: " + destination_problem);
 
     selfcal::SelfCalibrationConfig config;

@@ -5,13 +5,13 @@
 #include <geometry_msgs/PoseStamped.h>
 #include <std_srvs/Trigger.h>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_servo {
 
 AcquisitionSequencerConfig readAcquisitionSequencerConfig(const ros::NodeHandle& private_nh) {
   AcquisitionSequencerConfig c;
-  const exocet_mosaic::ParameterReader p(private_nh);
+  const exocet_common::ParameterReader p(private_nh);
   p.readInt("stops", &c.stops, 1, 10000, "stereo pairs to record (the first at the start pose)");
   p.readString("bag_path", &c.bag_path, {}, "output bag of the acquisition");
   p.readString("servo", &c.servo, {}, "name of the servo node");
@@ -71,8 +71,8 @@ bool AcquisitionSequencerRos::record() {
   if (right_image_->header.stamp != stamp || stamp < settle_until_) return false;
   geometry_msgs::PoseStamped left_pose, right_pose;
   try {
-    for (auto [frame, pose] : {std::make_pair(config_.left_frame, &left_pose),
-                               std::make_pair(config_.right_frame, &right_pose)}) {
+    for (auto [frame, pose] :
+         {std::make_pair(config_.left_frame, &left_pose), std::make_pair(config_.right_frame, &right_pose)}) {
       const geometry_msgs::TransformStamped t = tf_buffer_.lookupTransform(config_.world_frame, frame, stamp);
       pose->header = t.header;
       pose->pose.position.x = t.transform.translation.x;
@@ -119,8 +119,9 @@ void AcquisitionSequencerRos::onTick(const ros::TimerEvent&) {
     case State::kCapture: {
       std_srvs::Trigger trigger;
       if (!capture_client_.call(trigger) || !trigger.response.success) {
-        ROS_WARN_THROTTLE(5.0, "acquisition_sequencer: capture_reference: %s",
-                          trigger.response.message.empty() ? "service not available" : trigger.response.message.c_str());
+        ROS_WARN_THROTTLE(
+            5.0, "acquisition_sequencer: capture_reference: %s",
+            trigger.response.message.empty() ? "service not available" : trigger.response.message.c_str());
         break;  // tried again at the next tick
       }
       servo_status_ = "servoing";

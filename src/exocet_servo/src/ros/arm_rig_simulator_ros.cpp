@@ -10,7 +10,7 @@
 #include <sensor_msgs/JointState.h>
 #include <sensor_msgs/image_encodings.h>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_servo {
 
@@ -60,7 +60,7 @@ cv::Mat depthForRos(const cv::Mat& depth_m) {
 
 ArmRigSimulatorNodeConfig readArmRigSimulatorNodeConfig(const ros::NodeHandle& private_nh) {
   ArmRigSimulatorNodeConfig c;
-  const exocet_mosaic::ParameterReader p(private_nh);
+  const exocet_common::ParameterReader p(private_nh);
   p.readPositiveDouble("rate_hz", &c.rate_hz, 50.0, "images and control ticks per second (Hz)");
   p.readPositiveDouble("command_timeout_s", &c.command_timeout_s, 10.0,
                        "age after which a velocity command is dropped and the arm stops (s)");

@@ -12,10 +12,10 @@
 #include <sensor_msgs/image_encodings.h>
 #include <std_msgs/String.h>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 #include "exocet_servo/control/twist_limit.h"
 #include "exocet_servo/sim/arm_kinematics.h"
-#include "exocet_servo/sim/vent_renderer.h"
+#include "exocet_servo/vision/depth_lookup.h"
 
 namespace exocet_servo {
 
@@ -40,7 +40,7 @@ cv::Mat grayOf(const sensor_msgs::Image& msg, std::string* error) {
   }
 }
 
-/// The depth map as metres in CV_32F with +inf where unknown (the convention of sim::RenderedView), or empty.
+/// The depth map as metres in CV_32F with +inf where unknown (the convention of vision::screenedDepthAt), or empty.
 cv::Mat depthOf(const sensor_msgs::Image& msg, std::string* error) {
   try {
     cv::Mat depth;
@@ -64,70 +64,17 @@ cv::Mat depthOf(const sensor_msgs::Image& msg, std::string* error) {
 
 /// Depth at a pixel from a depth map, screened for discontinuities (the window's max / min), NaN when unusable.
 control::DepthLookup lookupIn(const cv::Mat& depth_m, const control::ImageServoConfig& config) {
-  auto view = std::make_shared<sim::RenderedView>();
-  view->depth_m = depth_m;
-  return
-      [view, radius = config.depth_check_radius_px, step = config.depth_max_relative_step](const Eigen::Vector2d& px) {
-        double d = 0.0;
-        return view->smoothDepthAt(px, radius, step, &d) ? d : std::numeric_limits<double>::quiet_NaN();
-      };
+  return [depth_m, radius = config.depth_check_radius_px,
+          step = config.depth_max_relative_step](const Eigen::Vector2d& px) {
+    double d = 0.0;
+    return vision::screenedDepthAt(depth_m, px, radius, step, &d) ? d : std::numeric_limits<double>::quiet_NaN();
+  };
 }
 
 std::string fixed(double value, int decimals = 3) {
   char text[64];
   std::snprintf(text, sizeof(text), "%.*f", decimals, value);
   return text;
-}
-
-/// A list parameter of `size` numbers (any size when size < 0); untouched when the parameter is not set.
-/// @throws std::invalid_argument naming the parameter, what it must be and what it got.
-void readNumberList(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
-                    int size, std::vector<double>* values, const std::string& meaning) {
-  XmlRpc::XmlRpcValue raw;
-  if (!nh.getParam(name, raw)) return;
-  const std::string expected = (size >= 0 ? "a list of " + std::to_string(size) + " numbers" : "a list of numbers");
-  if (raw.getType() != XmlRpc::XmlRpcValue::TypeArray || (size >= 0 && raw.size() != size))
-    throw std::invalid_argument(reader.describe(name) + " must be " + expected + " (" + meaning + ")");
-  std::vector<double> out;
-  for (int i = 0; i < raw.size(); ++i) {
-    if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeDouble)
-      out.push_back(static_cast<double>(raw[i]));
-    else if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeInt)
-      out.push_back(static_cast<int>(raw[i]));
-    else
-      throw std::invalid_argument(reader.describe(name) + " must be " + expected + " (" + meaning + "), item " +
-                                  std::to_string(i) + " is not a number");
-    if (!std::isfinite(out.back()))
-      throw std::invalid_argument(reader.describe(name) + ": item " + std::to_string(i) + " is not finite (" + meaning +
-                                  ")");
-  }
-  *values = out;
-}
-
-void readVector3(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
-                 Eigen::Vector3d* value, const std::string& meaning) {
-  std::vector<double> v(value->data(), value->data() + 3);
-  readNumberList(reader, nh, name, 3, &v, meaning);
-  *value = Eigen::Vector3d(v[0], v[1], v[2]);
-}
-
-void readStringList(const exocet_mosaic::ParameterReader& reader, const ros::NodeHandle& nh, const std::string& name,
-                    std::vector<std::string>* values, const std::string& meaning) {
-  XmlRpc::XmlRpcValue raw;
-  if (!nh.getParam(name, raw)) return;
-  std::vector<std::string> out;
-  if (raw.getType() == XmlRpc::XmlRpcValue::TypeArray) {
-    for (int i = 0; i < raw.size(); ++i) {
-      if (raw[i].getType() != XmlRpc::XmlRpcValue::TypeString) {
-        out.clear();
-        break;
-      }
-      out.push_back(static_cast<std::string>(raw[i]));
-    }
-  }
-  if (out.empty())
-    throw std::invalid_argument(reader.describe(name) + " must be a non-empty list of strings (" + meaning + ")");
-  *values = out;
 }
 
 }  // namespace
@@ -209,7 +156,7 @@ std::string checkJointState(const JointSafetyConfig& config, const sensor_msgs::
 
 ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
   ServoNodeConfig c;
-  const exocet_mosaic::ParameterReader p(private_nh);
+  const exocet_common::ParameterReader p(private_nh);
   control::ImageServoConfig& s = c.servo;
   // Gains per second: with images at 4 Hz, lambda dt = 0.5 near the goal and 0.25 far from it, as the simulated
   // loop's 0.7 / 0.3 per image.
@@ -248,12 +195,11 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
             "consecutive images with a growing |e| that stop the servo");
   p.readDouble("safety/growth_floor", &f.growth_floor, 0.0, 1.0,
                "|e| at or below this never counts as growing (the noise near the goal)");
-  readVector3(p, private_nh, "safety/workspace_min_m", &f.workspace_min_m,
-              "lower corner [x, y, z] of the workspace box of the left camera's centre in ~safety/world_frame (m)");
-  readVector3(p, private_nh, "safety/workspace_max_m", &f.workspace_max_m,
-              "upper corner [x, y, z] of the workspace box (m), above the lower corner on every axis");
-  readVector3(p, private_nh, "safety/workspace_centre_m", &f.workspace_centre_m,
-              "centre [x, y, z] of the workspace sphere (m)");
+  p.readVector3("safety/workspace_min_m", &f.workspace_min_m,
+                "lower corner [x, y, z] of the workspace box of the left camera's centre in ~safety/world_frame (m)");
+  p.readVector3("safety/workspace_max_m", &f.workspace_max_m,
+                "upper corner [x, y, z] of the workspace box (m), above the lower corner on every axis");
+  p.readVector3("safety/workspace_centre_m", &f.workspace_centre_m, "centre [x, y, z] of the workspace sphere (m)");
   p.readDouble("safety/workspace_radius_m", &f.workspace_radius_m, 0.0, 1000.0,
                "radius of the workspace sphere (m), 0 disables it");
   const std::string safety_problems = f.validate();
@@ -264,12 +210,11 @@ ServoNodeConfig readServoNodeConfig(const ros::NodeHandle& private_nh) {
 
   JointSafetyConfig& j = c.joints;
   p.readBool("safety/check_joints", &j.enabled, "check joint_states against the joint limits");
-  readStringList(p, private_nh, "safety/joint_names", &j.names, "the checked joints' names in joint_states");
+  p.readStringList("safety/joint_names", &j.names, "the checked joints' names in joint_states");
   const int n = static_cast<int>(j.names.size());
-  readNumberList(p, private_nh, "safety/joint_min_rad", n, &j.min_rad, "lower position limit of each joint (rad)");
-  readNumberList(p, private_nh, "safety/joint_max_rad", n, &j.max_rad, "upper position limit of each joint (rad)");
-  readNumberList(p, private_nh, "safety/joint_max_velocity_rad_s", n, &j.max_velocity_rad_s,
-                 "velocity limit of each joint (rad/s)");
+  p.readNumberList("safety/joint_min_rad", n, &j.min_rad, "lower position limit of each joint (rad)");
+  p.readNumberList("safety/joint_max_rad", n, &j.max_rad, "upper position limit of each joint (rad)");
+  p.readNumberList("safety/joint_max_velocity_rad_s", n, &j.max_velocity_rad_s, "velocity limit of each joint (rad/s)");
   p.readDouble("safety/joint_margin_rad", &j.margin_rad, 0.0, 1.0, "stop this far inside a joint limit (rad)");
   p.readDouble(
       "safety/joint_lookahead_s", &j.lookahead_s, 0.0, 10.0,
@@ -349,8 +294,8 @@ bool ServoRos::onCaptureReference(std_srvs::Trigger::Request&, std_srvs::Trigger
     // joint_states connection can come up after the image topics'), so the caller tries again.
     std::lock_guard<std::mutex> lock(joint_mutex_);
     if (!joint_state_) {
-      res.message = "no joint state received yet on " + joint_state_sub_.getTopic() +
-                    " (~safety/check_joints is on); try again";
+      res.message =
+          "no joint state received yet on " + joint_state_sub_.getTopic() + " (~safety/check_joints is on); try again";
       return true;
     }
   }

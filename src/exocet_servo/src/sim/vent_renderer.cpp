@@ -1,5 +1,7 @@
 #include "exocet_servo/sim/vent_renderer.h"
 
+#include "exocet_servo/vision/depth_lookup.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -124,22 +126,7 @@ std::string VentSceneConfig::validate() const {
 
 bool RenderedView::smoothDepthAt(const Eigen::Vector2d& px, int radius_px, double max_relative_step,
                                  double* depth) const {
-  if (depth_m.empty() || !px.allFinite()) return false;
-  const int x0 = static_cast<int>(std::floor(px.x())), y0 = static_cast<int>(std::floor(px.y()));
-  const int r = std::max(radius_px, 0);
-  if (x0 - r < 0 || y0 - r < 0 || x0 + 1 + r >= depth_m.cols || y0 + 1 + r >= depth_m.rows) return false;
-  float lo = std::numeric_limits<float>::infinity(), hi = 0.0f;
-  for (int y = y0 - r; y <= y0 + 1 + r; ++y) {
-    const float* row = depth_m.ptr<float>(y);
-    for (int x = x0 - r; x <= x0 + 1 + r; ++x) {
-      if (!std::isfinite(row[x])) return false;
-      lo = std::min(lo, row[x]);
-      hi = std::max(hi, row[x]);
-    }
-  }
-  if (hi > lo * (1.0 + max_relative_step)) return false;
-  *depth = bilinear(depth_m, px.x(), px.y());
-  return true;
+  return vision::screenedDepthAt(depth_m, px, radius_px, max_relative_step, depth);
 }
 
 VentRenderer::VentRenderer(const VentSceneConfig& config) : config_(config) {
@@ -294,7 +281,7 @@ double distanceToScene(const VentSceneConfig& scene, const Eigen::Vector3d& p) {
   const Eigen::Vector2d base_rim(scene.base_radius_m, 0.0), top_rim(scene.top_radius_m, scene.height_m);
   double best = std::min(toSegment(base_rim, top_rim), toSegment(top_rim, Eigen::Vector2d(0.0, scene.height_m)));
   if (scene.draw_seabed) {
-    if (q.x() >= scene.base_radius_m) {  // nearest seabed point straight below (the plane is drawn, untextured,
+    if (q.x() >= scene.base_radius_m) {        // nearest seabed point straight below (the plane is drawn, untextured,
       best = std::min(best, std::abs(q.y()));  // beyond its textured square too)
     } else {  // above or below the chimney's foot: the nearest seabed point is on the base rim
       best = std::min(best, (q - base_rim).norm());

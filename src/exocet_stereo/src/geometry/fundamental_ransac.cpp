@@ -4,7 +4,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "exocet_mosaic/selfcal/fundamental_estimator.h"
+#include "exocet_common/geometry/fundamental_estimator.h"
 
 namespace exocet_stereo {
 namespace geometry {
@@ -37,14 +37,14 @@ FundamentalFit fitFundamentalRansac(const std::vector<Eigen::Vector2d>& a, const
     return fit;
   }
   // The project's own normalised 8-point inside MSAC (exocet_mosaic's self-calibration core).
-  exocet_mosaic::selfcal::FundamentalConfig estimator_config;
+  exocet_common::geometry::FundamentalConfig estimator_config;
   estimator_config.threshold_px = config.threshold_px;
   estimator_config.confidence = config.confidence;
   estimator_config.max_iterations = config.max_samples;
   estimator_config.refinement_rounds = std::max(1, config.refits);
   estimator_config.seed = config.seed;
-  const exocet_mosaic::selfcal::FundamentalResult result =
-      exocet_mosaic::selfcal::FundamentalEstimator(estimator_config).estimate(a, b);
+  const exocet_common::geometry::FundamentalResult result =
+      exocet_common::geometry::FundamentalEstimator(estimator_config).estimate(a, b);
   fit.samples = result.iterations;
   if (!result.ok) {
     fit.failure = result.failure;

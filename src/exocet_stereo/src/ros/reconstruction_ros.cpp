@@ -5,7 +5,7 @@
 #include <std_msgs/String.h>
 #include <visualization_msgs/Marker.h>
 
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 #include "exocet_stereo/ros/acquisition_bag.h"
 
 namespace exocet_stereo {
@@ -14,9 +14,8 @@ namespace {
 
 mesh::AcquisitionReconstructionConfig readConfig(const ros::NodeHandle& pnh) {
   mesh::AcquisitionReconstructionConfig c;
-  const exocet_mosaic::ParameterReader p(pnh);
-  p.readString("method", &c.depth.method, {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"},
-               "dense stereo method");
+  const exocet_common::ParameterReader p(pnh);
+  p.readString("method", &c.depth.method, {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"}, "dense stereo method");
   p.readPositiveDouble("min_depth_m", &c.depth.min_depth_m, 1e4, "nearest depth searched (m)");
   p.readPositiveDouble("max_depth_m", &c.depth.max_depth_m, 1e4, "farthest depth searched (m), above min_depth_m");
   p.readPositiveDouble("voxel_m", &c.fusion.voxel_m, 1e3, "voxel of the fused cloud and cell of its surface (m)");
@@ -33,7 +32,7 @@ mesh::AcquisitionReconstructionConfig readConfig(const ros::NodeHandle& pnh) {
 ReconstructionRos::ReconstructionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh), pnh_(private_nh), diagnostics_(nh, private_nh) {
   readConfig(pnh_);  // refuse bad parameters at start; they are read again at each request
-  exocet_mosaic::ParameterReader(pnh_).readString("frame_id", &frame_id_, {}, "frame of the bag's camera poses");
+  exocet_common::ParameterReader(pnh_).readString("frame_id", &frame_id_, {}, "frame of the bag's camera poses");
   progress_pub_ = pnh_.advertise<std_msgs::String>("progress", 5, true);
   cloud_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("cloud", 1, true);
   surface_pub_ = pnh_.advertise<visualization_msgs::Marker>("surface", 1, true);
@@ -68,7 +67,7 @@ bool ReconstructionRos::onReconstruct(std_srvs::Trigger::Request&, std_srvs::Tri
   std::string bag, output_dir;
   mesh::AcquisitionReconstructionConfig config;
   try {
-    const exocet_mosaic::ParameterReader p(pnh_);
+    const exocet_common::ParameterReader p(pnh_);
     p.readString("bag", &bag, {}, "acquisition bag to reconstruct");
     p.readString("output_dir", &output_dir, {}, "folder of the files written");
     config = readConfig(pnh_);

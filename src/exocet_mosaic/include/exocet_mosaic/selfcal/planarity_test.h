@@ -12,10 +12,15 @@
 
 #include <Eigen/Core>
 
-#include "exocet_mosaic/selfcal/fundamental_estimator.h"
+#include "exocet_common/geometry/fundamental_estimator.h"
 
 namespace exocet_mosaic {
 namespace selfcal {
+
+// The fundamental-matrix estimator is the shared one (exocet_common), which the stereo side uses too.
+using exocet_common::geometry::FundamentalConfig;
+using exocet_common::geometry::FundamentalEstimator;
+using exocet_common::geometry::FundamentalResult;
 
 /**
  * @brief Sampson distance (pixels) of a match to the homography H (b ~ H a): the first-order distance in R^4 from

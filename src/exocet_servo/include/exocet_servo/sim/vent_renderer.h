@@ -57,8 +57,7 @@ struct RenderedView {
   cv::Mat image;    ///< CV_8UC1
   cv::Mat depth_m;  ///< CV_32FC1, Z in the camera frame of the ray through each pixel centre; +inf where none hit
 
-  /// Depth at a sub-pixel position (bilinear) when the 2 r + 1 square around it holds no depth discontinuity
-  /// (max / min <= 1 + max_relative_step): points on a silhouette mix foreground and background and are no 3D point.
+  /// Depth at a sub-pixel position, refused across discontinuities: vision::screenedDepthAt on depth_m.
   /// @return false outside the image, on the water, or across a discontinuity.
   bool smoothDepthAt(const Eigen::Vector2d& px, int radius_px, double max_relative_step, double* depth_m) const;
 };

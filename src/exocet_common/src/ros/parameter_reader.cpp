@@ -1,10 +1,12 @@
-#include "exocet_mosaic/ros/parameter_reader.h"
+#include "exocet_common/ros/parameter_reader.h"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
-namespace exocet_mosaic {
+namespace exocet_common {
 namespace {
 
 std::string valueText(XmlRpc::XmlRpcValue& raw) {
@@ -48,9 +50,11 @@ void ParameterReader::readDouble(const std::string& name, double* value, double 
 
 void ParameterReader::readPositiveDouble(const std::string& name, double* value, double max,
                                          const std::string& meaning) const {
+  XmlRpc::XmlRpcValue raw;
+  if (!fetch(name, &raw)) return;
   double v = *value;
-  readDouble(name, &v, -1e300, max, meaning);
-  if (!(v > 0.0))
+  readDouble(name, &v, -std::numeric_limits<double>::max(), std::numeric_limits<double>::max(), meaning);
+  if (!(v > 0.0 && v <= max))
     throw std::invalid_argument(describe(name) + " = " + number(v) + " is out of range (0, " + number(max) +
                                 "]: " + meaning);
   *value = v;
@@ -60,8 +64,7 @@ void ParameterReader::readInt(const std::string& name, int* value, int min, int 
   XmlRpc::XmlRpcValue raw;
   if (!fetch(name, &raw)) return;
   if (raw.getType() != XmlRpc::XmlRpcValue::TypeInt)
-    throw std::invalid_argument(describe(name) + " must be an integer (" + meaning + "), got '" + valueText(raw) +
-                                "'");
+    throw std::invalid_argument(describe(name) + " must be an integer (" + meaning + "), got '" + valueText(raw) + "'");
   const int v = static_cast<int>(raw);
   if (v < min || v > max)
     throw std::invalid_argument(describe(name) + " = " + std::to_string(v) + " is out of range [" +
@@ -119,4 +122,62 @@ void ParameterReader::readTopic(const std::string& name, std::string* topic) con
                                 (why.empty() ? std::string() : ": " + why));
 }
 
-}  // namespace exocet_mosaic
+void ParameterReader::readRequiredString(const std::string& name, std::string* value,
+                                         const std::string& meaning) const {
+  XmlRpc::XmlRpcValue raw;
+  if (!fetch(name, &raw)) throw std::invalid_argument(describe(name) + " is required: " + meaning);
+  std::string v = *value;
+  readString(name, &v, {}, meaning);
+  *value = v;
+}
+
+void ParameterReader::readNumberList(const std::string& name, int size, std::vector<double>* values,
+                                     const std::string& meaning) const {
+  XmlRpc::XmlRpcValue raw;
+  if (!fetch(name, &raw)) return;
+  const std::string expected = (size >= 0 ? "a list of " + std::to_string(size) + " numbers" : "a list of numbers");
+  if (raw.getType() != XmlRpc::XmlRpcValue::TypeArray || (size >= 0 && raw.size() != size))
+    throw std::invalid_argument(describe(name) + " must be " + expected + " (" + meaning + "), got '" + valueText(raw) +
+                                "'");
+  std::vector<double> out;
+  for (int i = 0; i < raw.size(); ++i) {
+    if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeDouble)
+      out.push_back(static_cast<double>(raw[i]));
+    else if (raw[i].getType() == XmlRpc::XmlRpcValue::TypeInt)
+      out.push_back(static_cast<int>(raw[i]));
+    else
+      throw std::invalid_argument(describe(name) + " must be " + expected + " (" + meaning + "), item " +
+                                  std::to_string(i) + " is not a number");
+    if (!std::isfinite(out.back()))
+      throw std::invalid_argument(describe(name) + ": item " + std::to_string(i) + " is not finite (" + meaning + ")");
+  }
+  *values = out;
+}
+
+void ParameterReader::readVector3(const std::string& name, Eigen::Vector3d* value, const std::string& meaning) const {
+  std::vector<double> v(value->data(), value->data() + 3);
+  readNumberList(name, 3, &v, meaning);
+  *value = Eigen::Vector3d(v[0], v[1], v[2]);
+}
+
+void ParameterReader::readStringList(const std::string& name, std::vector<std::string>* values,
+                                     const std::string& meaning) const {
+  XmlRpc::XmlRpcValue raw;
+  if (!fetch(name, &raw)) return;
+  std::vector<std::string> out;
+  if (raw.getType() == XmlRpc::XmlRpcValue::TypeArray) {
+    for (int i = 0; i < raw.size(); ++i) {
+      if (raw[i].getType() != XmlRpc::XmlRpcValue::TypeString) {
+        out.clear();
+        break;
+      }
+      out.push_back(static_cast<std::string>(raw[i]));
+    }
+  }
+  if (out.empty())
+    throw std::invalid_argument(describe(name) + " must be a non-empty list of strings (" + meaning + "), got '" +
+                                valueText(raw) + "'");
+  *values = out;
+}
+
+}  // namespace exocet_common

@@ -6,8 +6,7 @@
 
 #include <string>
 
-namespace exocet_mosaic {
-namespace sim {
+namespace exocet_common {
 
 /// Temporary name beside `final_path` (same folder, so rename() is atomic): "<dir>/.<name>.partial-<pid>".
 std::string temporaryPathFor(const std::string& final_path);
@@ -21,5 +20,4 @@ void commitTemporaryFile(const std::string& temporary_path, const std::string& f
 /// Checks that the folder of `path` exists and is writable; returns an error message or "".
 std::string checkWritableDestination(const std::string& path);
 
-}  // namespace sim
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

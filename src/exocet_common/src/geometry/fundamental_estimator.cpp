@@ -1,4 +1,4 @@
-#include "exocet_mosaic/selfcal/fundamental_estimator.h"
+#include "exocet_common/geometry/fundamental_estimator.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,8 +10,8 @@
 
 #include <Eigen/Dense>
 
-namespace exocet_mosaic {
-namespace selfcal {
+namespace exocet_common {
+namespace geometry {
 
 namespace {
 
@@ -205,5 +205,5 @@ FundamentalResult FundamentalEstimator::estimate(const std::vector<Eigen::Vector
   return result;
 }
 
-}  // namespace selfcal
-}  // namespace exocet_mosaic
+}  // namespace geometry
+}  // namespace exocet_common

@@ -14,8 +14,8 @@
 
 #include <Eigen/Core>
 
-namespace exocet_mosaic {
-namespace selfcal {
+namespace exocet_common {
+namespace geometry {
 
 /**
  * @brief Hartley's normalised 8-point algorithm: both point sets are moved to their centroid and scaled to a mean
@@ -78,5 +78,5 @@ class FundamentalEstimator {
   FundamentalConfig config_;
 };
 
-}  // namespace selfcal
-}  // namespace exocet_mosaic
+}  // namespace geometry
+}  // namespace exocet_common

@@ -16,7 +16,7 @@
 #include <system_error>
 #include <vector>
 
-namespace exocet_mosaic {
+namespace exocet_common {
 namespace testing {
 
 class TempDir {
@@ -53,4 +53,4 @@ class TempDir {
 };
 
 }  // namespace testing
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

@@ -1,4 +1,4 @@
-#include "exocet_mosaic/sim/atomic_file.h"
+#include "exocet_common/atomic_file.h"
 
 #include <cerrno>
 #include <cstdio>
@@ -9,8 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-namespace exocet_mosaic {
-namespace sim {
+namespace exocet_common {
 
 namespace {
 std::string folderOf(const std::string& path) {
@@ -66,5 +65,4 @@ std::string checkWritableDestination(const std::string& path) {
   return "";
 }
 
-}  // namespace sim
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

@@ -9,8 +9,9 @@
 #include <vector>
 
 #include <ros/ros.h>
+#include <Eigen/Core>
 
-namespace exocet_mosaic {
+namespace exocet_common {
 
 /**
  * Each read leaves the value untouched when the parameter is not set (the caller's default stands) and throws
@@ -35,6 +36,14 @@ class ParameterReader {
   void readOptionalTopic(const std::string& name, std::string* topic) const;
   /// Any string, the empty one included (e.g. a file path where "" means "do not write").
   void readOptionalString(const std::string& name, std::string* value, const std::string& meaning) const;
+  /// A non-empty string that must be set: @throws std::invalid_argument "... is required: meaning" when it is not.
+  void readRequiredString(const std::string& name, std::string* value, const std::string& meaning) const;
+  /// A list of `size` finite numbers (any length when size < 0).
+  void readNumberList(const std::string& name, int size, std::vector<double>* values, const std::string& meaning) const;
+  /// Three finite numbers, e.g. a lever arm [x, y, z].
+  void readVector3(const std::string& name, Eigen::Vector3d* value, const std::string& meaning) const;
+  /// A non-empty list of strings.
+  void readStringList(const std::string& name, std::vector<std::string>* values, const std::string& meaning) const;
 
   /// "parameter ~name (/resolved/name)", for messages.
   std::string describe(const std::string& name) const;
@@ -44,4 +53,4 @@ class ParameterReader {
   ros::NodeHandle nh_;
 };
 
-}  // namespace exocet_mosaic
+}  // namespace exocet_common
