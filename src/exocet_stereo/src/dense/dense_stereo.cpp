@@ -146,23 +146,14 @@ DenseStereoConfig defaultConfigFor(const std::string& method, int max_disparity_
     config.left_right_check = false;
   } else if (method == "pm") {
     config.fill_median_radius_px = 17;  // the paper's weighted median over the 35x35 window
-    // Not the paper's: a left-right tolerance of 0.75 px (the planes are sub-pixel; 1 px let Venus' wrong planes by)
-    // and a final 5x5 median (isolated wrong pixels). Non-occluded bad pixels, Tsukuba / Venus / Teddy / Cones:
-    // 2.14 / 0.53 / 4.03 / 2.70 with 1 px and no median, 1.86 / 0.21 / 3.73 / 2.42 with these (chosen on these
-    // four scenes: there is no other ground truth here).
+    // Three settings depart from the paper, each chosen on the four Middlebury scenes (there is no other ground
+    // truth here): a left-right tolerance of 0.75 px (the planes are
+    // sub-pixel, and 1 px lets wrong planes through), a final 5x5 median (isolated wrong pixels), and gradient
+    // differences truncated at 4 grey levels per pixel instead of 2. The paper does not give its gradient operator,
+    // so its 2 has no fixed scale against our central differences; at 2, on steep textured surfaces nearly every
+    // window pixel's gradient term saturates under any plane, and the wrong plane can cost less than the true one.
     config.left_right_tolerance_px = 0.75;
     config.median_radius_px = 2;
-    // Nor the paper's value: gradient differences truncated at 4 grey levels per pixel instead of 2. The paper does
-    // not give its gradient operator, so its 2 has no fixed scale against our central differences. At 2, the wrong
-    // plane cost less than the true one (a 7x7 fit of the ground truth) at 97 % of Teddy's bad pixels, most on the
-    // steep textured floor at the bottom: nearly every window pixel's gradient difference was truncated, for the true
-    // plane as for the wrong ones. Non-occluded bad pixels, Tsukuba / Venus / Teddy / Cones (seeds 1, 2, 3): at 2,
-    // 1.86 / 0.215, 0.203, 0.230 / 3.73, 3.67 / 2.42; at 4, 2.00 / 0.327, 0.284, 0.278 / 3.02, 3.37, 3.45 / 2.29,
-    // 2.26: Venus (newsprint, planar) lost what Teddy and Cones gained, in its mismatched pixels at the sheets' edges,
-    // which the right view's confirmation and a cost margin in the filling then recovered (patchmatch_stereo.cpp,
-    // kForegroundCostRatio): 2.05, 2.04, 1.86 / 0.189, 0.176, 0.160 / 3.10, 3.47, 3.52 / 2.27, 2.24; and the weighted
-    // median's window kept symmetric at the image border (weightedMedianFill()): Teddy 2.74, 3.00, 2.91, Cones 2.27,
-    // 2.22, 2.35, Tsukuba and Venus unchanged.
     config.pm_tau_gradient = 4.0;
   }
   return config;

@@ -73,16 +73,14 @@ Plane planeFromPointNormal(float x, float y, float z, float nx, float ny, float 
 }
 
 // Post-processing: regions of fewer pixels than this, whose planes no neighbour continues within the tolerance, are
-// isolated wrong planes (removeSmallPlaneRegions()). Measured on the four Middlebury scenes: 8-20 px and 0.5-0.8 px
-// give the same sum of bad-pixel rates within 0.15; a plain disparity-difference speckle filter (0.5 px) fixes Venus
-// as well but breaks Teddy's steep floor into speckles (+0.9).
+// isolated wrong planes (removeSmallPlaneRegions()). The result is flat over 8-20 px and 0.5-0.8 px on the four
+// Middlebury scenes. A plain disparity-difference speckle filter would break steep slanted surfaces into speckles.
 constexpr int kMinPlaneRegionPx = 12;
 constexpr double kPlaneRegionTolerancePx = 0.7;
 
 // Post-processing: a mismatched pixel that the right view does not decide takes the higher (foreground) of its two
-// neighbouring planes only if that one costs this much less; nearer ties go to the background, as in the paper. On
-// the four Middlebury scenes the ratio trades Tsukuba against Venus and Teddy (seed 1, non-occluded bad pixels): 1.0
-// gives 2.01 / 0.25 / 2.97, 0.97 gives 2.05 / 0.19 / 3.10, 0.9 gives 2.10 / 0.18 / 3.12 (chosen on these scenes).
+// neighbouring planes only if that one costs this much less; nearer ties go to the background, as in the paper. The
+// ratio trades Tsukuba against Venus and Teddy; it is chosen on the four Middlebury scenes (docs/benchmarks.md).
 constexpr double kForegroundCostRatio = 0.97;
 
 // Planes steeper than this (|n_z| below) are never proposed: they would map one pixel onto many in the other view.
@@ -307,8 +305,8 @@ class ViewSolver {
     float total = 0.0f;
     for (const Sample& s : window) {
       // A window pixel matched outside the other image compares with its border column (clamped) rather than paying
-      // the maximal cost: that penalty favoured any plane keeping the window inside, so pixels near the left border
-      // lost their true plane (Venus' left border band: 35 % -> 6 % bad pixels).
+      // the maximal cost: that penalty would favour any plane keeping the window inside, and pixels near the left
+      // border would lose their true plane.
       const float xo = std::min(std::max(s.x - sign_ * plane.at(s.x, s.y), 0.0f), last_x);
       int i0 = static_cast<int>(xo);
       if (i0 >= other_.cols - 1) i0 = other_.cols - 2;

@@ -14,7 +14,7 @@
  * that view's pass (not per pixel inside the pass); window pixels with weight below pm_min_weight are skipped; a
  * candidate's window sum stops as soon as it reaches the pixel's best cost; a window pixel whose match q' falls
  * outside the other image is compared with that image's border column (the paper does not say; a maximal cost there
- * favours any plane that keeps the window inside and cost Venus' left border band a third of its pixels). The scan
+ * favours any plane that keeps the window inside, which costs pixels near the image border their true plane). The scan
  * itself is the paper's sequential one, run as anti-diagonal wavefronts: a pixel only reads its two already-visited
  * neighbours, so all pixels of one anti-diagonal are independent and the result equals the raster scan's exactly, for
  * any number of threads (random draws are a hash of seed, view, iteration and pixel).
@@ -26,17 +26,12 @@
  * background, as in the paper); if mismatched, the one the right view confirms, else the higher one only when it
  * costs 3 % less than the lower (fillHolesFromPlanes()); then a colour-weighted median over the filled pixels, as in
  * the paper, except the mismatched ones given the higher plane. The paper fills every invalid pixel with the
- * background: at Teddy's and Cones' discontinuities that erased foreground pixels whose right-view disparity alone
- * was wrong (non-occluded bad pixels, Tsukuba / Venus / Teddy / Cones: 2.37 / 0.65 / 4.07 / 2.74 with the paper's
- * filling, 2.21 / 0.69 / 4.05 / 2.71 with the classification, 2.14 / 0.53 / 4.03 / 2.70 with the small regions
- * removed as well). defaultConfigFor("pm") then departs from the paper three times: a left-right tolerance of 0.75 px
- * instead of 1 (the planes are sub-pixel) and a final 5x5 median of the filled map (1.86 / 0.21 / 3.73 / 2.42), and
- * gradient differences truncated at 4 grey levels per pixel instead of 2 (2.00 / 0.33 / 3.02 / 2.29; with the right
- * view's confirmation and the 3 % margin for mismatched pixels: 2.05 / 0.19 / 3.10 / 2.27; with the weighted median's
- * window kept symmetric where the image border cuts it, weightedMedianFill(): 2.05 / 0.19 / 2.74 / 2.27). The shared
- * flags (left_right_check, left_right_tolerance_px, fill_holes, fill_median_radius_px, median_radius_px) switch the
- * steps. Disparities are continuous by nature; with subpixel = false compute() rounds them to integers (integer ground
- * truth).
+ * background, which erases foreground pixels at discontinuities whose right-view disparity alone was wrong; the
+ * classification keeps them. defaultConfigFor("pm") departs from the paper three more times (a left-right tolerance
+ * of 0.75 px, a final 5x5 median, gradient differences truncated at 4 grey levels), each chosen on the four Middlebury
+ * scenes: see dense_stereo.cpp for why. The shared flags (left_right_check, left_right_tolerance_px, fill_holes,
+ * fill_median_radius_px, median_radius_px) switch the steps. Disparities are continuous by nature; with subpixel =
+ * false compute() rounds them to integers (integer ground truth).
  */
 #pragma once
 
