@@ -44,14 +44,6 @@ Eigen::Matrix3d fundamentalFromViews(const PinholeView& view1, const PinholeView
   return fundamentalFromCalibration(view1.K, view2.K, relativePose(view1, view2));
 }
 
-double sampsonDistance_px(const Eigen::Matrix3d& F, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-  const Eigen::Vector3d line_in_b = F * a.homogeneous();              // epipolar line of a in image 2
-  const Eigen::Vector3d line_in_a = F.transpose() * b.homogeneous();  // epipolar line of b in image 1
-  const double gradient2 = line_in_b.head<2>().squaredNorm() + line_in_a.head<2>().squaredNorm();
-  if (gradient2 <= 0.0) return std::numeric_limits<double>::infinity();
-  return std::abs(b.homogeneous().dot(line_in_b)) / std::sqrt(gradient2);
-}
-
 double epipolarLineDistance_px(const Eigen::Matrix3d& F, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return lineDistance(F * a.homogeneous(), b);
 }

@@ -21,6 +21,8 @@ namespace selfcal {
 using exocet_common::geometry::FundamentalConfig;
 using exocet_common::geometry::FundamentalEstimator;
 using exocet_common::geometry::FundamentalResult;
+using exocet_common::geometry::eightPointFundamental;
+using exocet_common::geometry::sampsonDistance_px;
 
 /**
  * @brief Sampson distance (pixels) of a match to the homography H (b ~ H a): the first-order distance in R^4 from

@@ -28,6 +28,8 @@ namespace selfcal {
 using exocet_common::geometry::FundamentalConfig;
 using exocet_common::geometry::FundamentalEstimator;
 using exocet_common::geometry::FundamentalResult;
+using exocet_common::geometry::eightPointFundamental;
+using exocet_common::geometry::sampsonDistance_px;
 
 /// Everything the self-calibration can be tuned by. validate() names a bad field and its allowed range.
 struct SelfCalibrationConfig {

@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 
+#include "exocet_common/geometry/fundamental_estimator.h"
 #include "exocet_stereo/geometry/pinhole_view.h"
 
 namespace exocet_stereo {
@@ -34,11 +35,8 @@ Eigen::Matrix3d fundamentalFromCalibration(const Eigen::Matrix3d& K1, const Eige
 /// F of two calibrated views of a multi-view set (unit Frobenius norm).
 Eigen::Matrix3d fundamentalFromViews(const PinholeView& view1, const PinholeView& view2);
 
-/**
- * @brief Sampson distance (pixels) of a match to F: the first-order distance in R^4 from (a, b) to the nearest pair
- * satisfying b^T F a = 0 exactly.
- */
-double sampsonDistance_px(const Eigen::Matrix3d& F, const Eigen::Vector2d& a, const Eigen::Vector2d& b);
+/// Sampson distance (pixels) of a match to F: the shared one (exocet_common), which the estimator also scores with.
+using exocet_common::geometry::sampsonDistance_px;
 
 /// Distance (pixels) from b to the epipolar line F a in the second image.
 double epipolarLineDistance_px(const Eigen::Matrix3d& F, const Eigen::Vector2d& a, const Eigen::Vector2d& b);
