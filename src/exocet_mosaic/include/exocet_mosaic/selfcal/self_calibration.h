@@ -14,7 +14,6 @@
 
 #include <opencv2/core.hpp>
 
-#include "exocet_common/geometry/fundamental_estimator.h"
 #include "exocet_mosaic/selfcal/feature_track_builder.h"
 #include "exocet_mosaic/selfcal/mendonca_cipolla_calibrator.h"
 #include "exocet_mosaic/selfcal/planar_self_calibrator.h"
@@ -23,13 +22,6 @@
 
 namespace exocet_mosaic {
 namespace selfcal {
-
-// The fundamental-matrix estimator is the shared one (exocet_common), which the stereo side uses too.
-using exocet_common::geometry::FundamentalConfig;
-using exocet_common::geometry::FundamentalEstimator;
-using exocet_common::geometry::FundamentalResult;
-using exocet_common::geometry::eightPointFundamental;
-using exocet_common::geometry::sampsonDistance_px;
 
 /// Everything the self-calibration can be tuned by. validate() names a bad field and its allowed range.
 struct SelfCalibrationConfig {
