@@ -68,7 +68,7 @@ TEST(Pfm, RoundTripKeepsValuesAndMarksUnknownAsInfinity) {
   cv::Mat image(7, 11, CV_32F);
   cv::randu(image, -50.0f, 50.0f);
   image.at<float>(3, 4) = std::numeric_limits<float>::quiet_NaN();
-  const std::string path = exocet_common::testing::TempDir() + "/round_trip.pfm";
+  const std::string path = testing::TempDir() + "/round_trip.pfm";
   io::writePfm(path, image);
   const cv::Mat back = io::readPfm(path);
   ASSERT_EQ(back.type(), CV_32FC1);
@@ -98,8 +98,8 @@ TEST(Pfm, RoundTripKeepsValuesAndMarksUnknownAsInfinity) {
 }
 
 TEST(Pfm, RejectsBadFilesAndTypes) {
-  EXPECT_THROW(io::readPfm(exocet_common::testing::TempDir() + "/does_not_exist.pfm"), std::runtime_error);
-  const std::string path = exocet_common::testing::TempDir() + "/truncated.pfm";
+  EXPECT_THROW(io::readPfm(testing::TempDir() + "/does_not_exist.pfm"), std::runtime_error);
+  const std::string path = testing::TempDir() + "/truncated.pfm";
   std::ofstream(path) << "Pf\n10 10\n-1.0\n"
                       << "abc";
   EXPECT_THROW(io::readPfm(path), std::runtime_error);

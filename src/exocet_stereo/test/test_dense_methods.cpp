@@ -198,7 +198,7 @@ TEST(DenseStereoFactory, KnowsEveryMethodAndRejectsOthers) {
 
 TEST(DenseStereoTool, WritesPfmAndExitsTwoOnBadInput) {
   const SyntheticPair pair = makeRandomDotPair(5.0, 0.0, 0.0);
-  const std::string dir = exocet_common::testing::TempDir();
+  const std::string dir = testing::TempDir();
   ASSERT_TRUE(cv::imwrite(dir + "/dots_left.png", pair.left));
   ASSERT_TRUE(cv::imwrite(dir + "/dots_right.png", pair.right));
   const std::string tool = std::string(EXOCET_TOOLS_DIR) + "/dense_stereo";
