@@ -1,11 +1,14 @@
 // Benchmark of the dive simulator: frames rendered per second on one thread, PAL and HD, with the sample dive's
 // underwater effects (light cone, attenuation, noise, marine snow) over a relief. Writes dive_synth.json.
 #include <chrono>
-#include <fstream>
 #include <iostream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "exocet_mosaic/sim/dive_description.h"
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 using namespace exocet_mosaic::sim;
@@ -38,9 +41,13 @@ Figures measure(const std::string& preset, bool relief, int frames) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string out_dir = "out/bench";
-  for (int i = 1; i + 1 < argc; ++i)
-    if (std::string(argv[i]) == "--output-dir") out_dir = argv[i + 1];
+  exocet_common::BenchmarkPaths paths;
+  CLI::App app(
+      "bench_dive_synth: frames rendered per second by the dive simulator on one thread, PAL and HD, flat\n"
+      "and with relief. Writes OUTPUT_DIR/dive_synth.json.",
+      "bench_dive_synth");
+  exocet_common::addBenchmarkPathOptions(app, &paths, false);
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
   const Figures pal = measure("pal", false, 150);
   const Figures pal_relief = measure("pal", true, 150);
   const Figures hd = measure("hd", false, 40);
@@ -48,13 +55,19 @@ int main(int argc, char** argv) {
   std::cout << "dive_synth rendering, one thread (frames/s, including tile generation along the track):\n"
             << "  720x576   flat seabed: " << pal.fps << "   with relief: " << pal_relief.fps << "\n"
             << "  1920x1080 flat seabed: " << hd.fps << "   with relief: " << hd_relief.fps << "\n";
-  const std::string path = out_dir + "/dive_synth.json";
-  std::ofstream json(path);
-  json << "{\n  \"fps_pal\": " << pal.fps << ",\n  \"fps_hd\": " << hd.fps << ",\n  \"fps_pal_relief\": "
-       << pal_relief.fps << ",\n  \"fps_hd_relief\": " << hd_relief.fps << ",\n  \"frames_pal\": " << pal.frames
-       << ",\n  \"frames_hd\": " << hd.frames << ",\n  \"threads\": 1\n}\n";
-  if (!json) {
-    std::cerr << "bench_dive_synth: cannot write " << path << "\n";
+  const std::string path = paths.output_dir + "/dive_synth.json";
+  nlohmann::ordered_json json;
+  json["fps_pal"] = pal.fps;
+  json["fps_hd"] = hd.fps;
+  json["fps_pal_relief"] = pal_relief.fps;
+  json["fps_hd_relief"] = hd_relief.fps;
+  json["frames_pal"] = pal.frames;
+  json["frames_hd"] = hd.frames;
+  json["threads"] = 1;
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dive_synth: " << e.what() << "\n";
     return 1;
   }
   std::cout << "wrote " << path << "\n";

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -23,6 +24,7 @@
 #include <vector>
 
 #include <boost/math/distributions/chi_squared.hpp>
+#include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -38,8 +40,10 @@
 #include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
+#include "exocet_common/json_file.h"
 #include "exocet_mosaic/sim/navigation_sensors.h"
 #include "exocet_mosaic/sim/vehicle_trajectory.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 
@@ -240,27 +244,6 @@ Misalignment misalignment(const std::vector<std::pair<int, int>>& pairs, const s
   }
   return {percentile(values, 0.5), percentile(values, 0.95)};
 }
-
-struct Json {
-  std::map<std::string, std::string> values;
-  void set(const std::string& key, double v) {
-    std::ostringstream s;
-    if (std::isfinite(v))
-      s << std::setprecision(6) << v;
-    else
-      s << "null";
-    values[key] = s.str();
-  }
-  void setText(const std::string& key, const std::string& v) { values[key] = "\"" + v + "\""; }
-  bool write(const std::string& path) const {
-    std::ofstream out(path);
-    out << "{\n";
-    size_t i = 0;
-    for (const auto& [k, v] : values) out << "  \"" << k << "\": " << v << (++i < values.size() ? ",\n" : "\n");
-    out << "}\n";
-    return bool(out);
-  }
-};
 
 // ---- Cross-pass registration: SIFT + RANSAC homography with its covariance ----------------------------------------
 
@@ -662,50 +645,66 @@ bool setFilterField(fusion::FilterConfig* c, const std::string& name, double val
   return true;
 }
 
+/// "NAME=VALUE" of --filter: NAME a numeric FilterConfig field, VALUE a number; empty if `text` is one.
+std::string filterOverrideError(const std::string& text, std::pair<std::string, double>* parsed = nullptr) {
+  const size_t eq = text.find('=');
+  if (eq == std::string::npos) return "takes NAME=VALUE, got '" + text + "'";
+  const std::string name = text.substr(0, eq), value = text.substr(eq + 1);
+  char* end = nullptr;
+  const double number = std::strtod(value.c_str(), &end);
+  if (value.empty() || *end != '\0') return "'" + value + "' is not a number (in '" + text + "')";
+  fusion::FilterConfig scratch;
+  if (!setFilterField(&scratch, name, number)) return "'" + name + "' is no numeric FilterConfig field";
+  if (parsed) *parsed = {name, number};
+  return "";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string out_dir = "out/bench", shared = "../shared/data", config_dir = EXOCET_CONFIG_DIR;
-  std::string dive_yaml = config_dir + "/dives/bench_fusion.yaml";
-  bool cross_pass = true;
+  exocet_common::BenchmarkPaths paths;
+  std::string dive_yaml = std::string(EXOCET_CONFIG_DIR) + "/dives/bench_fusion.yaml";
+  bool no_cross_pass = false;
   int monte_carlo_runs = 50;
-  bool mc_draw_focal = true;  // each Monte Carlo run's focal length drawn from the pixel-size prior
+  bool mc_exact_camera = false;
   std::vector<std::string> monte_carlo_overrides;  // "navigation.key=value": the Monte Carlo's sensors differ
-  std::vector<std::pair<std::string, double>> filter_overrides;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--output-dir" && i + 1 < argc)
-      out_dir = argv[++i];
-    else if (a == "--shared-data" && i + 1 < argc)
-      shared = argv[++i];
-    else if (a == "--dive" && i + 1 < argc)
-      dive_yaml = argv[++i];
-    else if (a == "--no-cross-pass")
-      cross_pass = false;
-    else if (a == "--monte-carlo-exact-camera")
-      mc_draw_focal = false;
-    else if (a == "--monte-carlo" && i + 1 < argc)
-      monte_carlo_runs = std::max(0, std::atoi(argv[++i]));
-    else if (a == "--monte-carlo-set" && i + 1 < argc)
-      monte_carlo_overrides.push_back(argv[++i]);
-    else if (a == "--filter" && i + 1 < argc) {
-      const std::string kv = argv[++i];
-      const size_t eq = kv.find('=');
-      if (eq == std::string::npos) {
-        std::cerr << "bench_fusion: --filter takes NAME=VALUE, got '" << kv << "'\n";
-        return 2;
-      }
-      filter_overrides.emplace_back(kv.substr(0, eq), std::stod(kv.substr(eq + 1)));
-    } else {
-      std::cerr << "usage: bench_fusion [--output-dir DIR] [--shared-data DIR] [--dive YAML] [--no-cross-pass]"
-                   " [--monte-carlo RUNS] [--monte-carlo-set navigation.KEY=VALUE]... [--monte-carlo-exact-camera]"
-                   " [--filter NAME=VALUE]...\n";
-      return 2;
-    }
-  }
+  std::vector<std::string> filter_texts;
+  CLI::App app(
+      "bench_fusion: the navigation fusion on a simulated dive, every sensor through fusion_node's front-end:\n"
+      "each source alone, filtered, smoothed, with cross-pass constraints, and the filter's consistency (NEES)\n"
+      "over Monte Carlo runs. Writes OUTPUT_DIR/fusion.json and OUTPUT_DIR/fusion_tracks.csv.",
+      "bench_fusion");
+  exocet_common::addBenchmarkPathOptions(app, &paths, false);
+  app.add_option("--dive", dive_yaml, "dive description")
+      ->type_name("YAML")
+      ->check(CLI::ExistingFile)
+      ->capture_default_str();
+  app.add_flag("--no-cross-pass", no_cross_pass, "skip the cross-pass registration and constraints");
+  app.add_option("--monte-carlo", monte_carlo_runs, "Monte Carlo runs of the NEES (0: none)")
+      ->type_name("RUNS")
+      ->check(exocet_common::atLeast(0))
+      ->capture_default_str();
+  app.add_option("--monte-carlo-set", monte_carlo_overrides,
+                 "a setting of the Monte Carlo runs' sensors (repeatable): their dive is the --dive YAML\nwith these")
+      ->type_name("navigation.KEY=VALUE")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  app.add_flag("--monte-carlo-exact-camera", mc_exact_camera,
+               "keep the camera's focal length in the Monte Carlo runs (default: drawn from the\npixel-size prior)");
+  app.add_option("--filter", filter_texts, "set a numeric FilterConfig field (repeatable)")
+      ->type_name("NAME=VALUE")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+      ->check(CLI::Validator([](std::string& text) { return filterOverrideError(text); }, ""));
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& out_dir = paths.output_dir;
+  const bool cross_pass = !no_cross_pass;
+  const bool mc_draw_focal = !mc_exact_camera;  // each Monte Carlo run's focal length drawn from the pixel-size prior
+  std::vector<std::pair<std::string, double>> filter_overrides(filter_texts.size());
+  for (size_t i = 0; i < filter_texts.size(); ++i) filterOverrideError(filter_texts[i], &filter_overrides[i]);
   cv::setNumThreads(1);
   std::cout << std::unitbuf;
-  Json json;
+  nlohmann::json json;  // keys sorted, as make-benchmarks-doc lists them
   const auto bench_start = Clock::now();
 
   // ---- 1. The dive ----
@@ -897,7 +896,7 @@ int main(int argc, char** argv) {
     std::cout << "cross-pass registration: median inlier residual " << percentile(residuals_px, 0.5)
               << " px, constraint error median " << 1000.0 * percentile(constraint_errors_m, 0.5) << " mm, p95 "
               << 1000.0 * percentile(constraint_errors_m, 0.95) << " mm\n";
-    json.set("cross_pass_constraint_error_median_m", percentile(constraint_errors_m, 0.5));
+    json["cross_pass_constraint_error_median_m"] = percentile(constraint_errors_m, 0.5);
     cross_constraints = static_cast<int>(cross.size());
     const fusion::CrossPassResult result =
         fusion::smoothWithCrossPassConstraints(all.log, all.smoothed_states, all.fixes, cross);
@@ -1103,81 +1102,83 @@ int main(int argc, char** argv) {
             << " updates/s, " << all.rewinds << " rewinds); RTS over " << all.smoothed_states.size() << " steps in "
             << all.smoother_seconds << " s\n";
 
-  json.set("frames", double(n));
-  json.set("path_length_m", path_m);
-  json.set("mean_gsd_m", gsd_mean);
-  json.set("registration_failures", registration_failures);
-  json.set("registration_pairs_per_s", (n - 1) / registration_s);
-  json.set("metric_step_rmse_m", metric.step_rmse_m);
-  json.set("image_step_noise_calibrated_along_m", calibrated_image_step_noise_along_m);
-  json.set("image_step_noise_calibrated_across_m", calibrated_image_step_noise_across_m);
-  json.set("rmse_image_only_m", rmse_image_only);
-  json.set("rmse_nav_only_m", rmse_nav_only);
-  json.set("rmse_usbl_only_m", rmse_usbl);
-  json.set("rmse_usbl_only_inliers_m", rmse_usbl_inliers);
-  json.set("rmse_nav_filter_m", rmse_nav_filter);
-  json.set("rmse_nav_smoothed_m", rmse_nav_smoothed);
-  json.set("rmse_filtered_m", rmse_filtered);
-  json.set("rmse_filtered_live_m", rmse_live);
-  json.set("rmse_smoothed_m", rmse_smoothed);
-  json.set("filtered_over_better_single_source", rmse_filtered / better_single);
-  json.set("return_misalignment_gsd_filtered_median", mis_filtered.median_gsd);
-  json.set("return_misalignment_gsd_filtered_p95", mis_filtered.p95_gsd);
-  json.set("return_misalignment_gsd_smoothed_median", mis_smoothed.median_gsd);
-  json.set("return_misalignment_gsd_smoothed_p95", mis_smoothed.p95_gsd);
-  json.set("return_misalignment_gsd_image_only_median", mis_image_only.median_gsd);
-  json.set("return_misalignment_gsd_nav_only_median", mis_nav_only.median_gsd);
-  json.set("return_pairs", double(pass_pairs.size()));
+  json["frames"] = double(n);
+  json["path_length_m"] = path_m;
+  json["mean_gsd_m"] = gsd_mean;
+  json["registration_failures"] = registration_failures;
+  json["registration_pairs_per_s"] = (n - 1) / registration_s;
+  json["metric_step_rmse_m"] = metric.step_rmse_m;
+  json["image_step_noise_calibrated_along_m"] = calibrated_image_step_noise_along_m;
+  json["image_step_noise_calibrated_across_m"] = calibrated_image_step_noise_across_m;
+  json["rmse_image_only_m"] = rmse_image_only;
+  json["rmse_nav_only_m"] = rmse_nav_only;
+  json["rmse_usbl_only_m"] = rmse_usbl;
+  json["rmse_usbl_only_inliers_m"] = rmse_usbl_inliers;
+  json["rmse_nav_filter_m"] = rmse_nav_filter;
+  json["rmse_nav_smoothed_m"] = rmse_nav_smoothed;
+  json["rmse_filtered_m"] = rmse_filtered;
+  json["rmse_filtered_live_m"] = rmse_live;
+  json["rmse_smoothed_m"] = rmse_smoothed;
+  json["filtered_over_better_single_source"] = rmse_filtered / better_single;
+  json["return_misalignment_gsd_filtered_median"] = mis_filtered.median_gsd;
+  json["return_misalignment_gsd_filtered_p95"] = mis_filtered.p95_gsd;
+  json["return_misalignment_gsd_smoothed_median"] = mis_smoothed.median_gsd;
+  json["return_misalignment_gsd_smoothed_p95"] = mis_smoothed.p95_gsd;
+  json["return_misalignment_gsd_image_only_median"] = mis_image_only.median_gsd;
+  json["return_misalignment_gsd_nav_only_median"] = mis_nav_only.median_gsd;
+  json["return_pairs"] = double(pass_pairs.size());
   if (cross_pass) {
-    json.set("return_misalignment_gsd_cross_pass_median", mis_cross.median_gsd);
-    json.set("return_misalignment_gsd_cross_pass_p95", mis_cross.p95_gsd);
-    json.set("rmse_cross_pass_m", rmse_cross);
-    json.set("cross_pass_constraints", cross_constraints);
-    json.set("cross_pass_seconds", cross_seconds);
+    json["return_misalignment_gsd_cross_pass_median"] = mis_cross.median_gsd;
+    json["return_misalignment_gsd_cross_pass_p95"] = mis_cross.p95_gsd;
+    json["rmse_cross_pass_m"] = rmse_cross;
+    json["cross_pass_constraints"] = cross_constraints;
+    json["cross_pass_seconds"] = cross_seconds;
   }
   // The figure: the p95 over the return pairs of the final smoothed track (RTS with the cross-pass
   // constraints; RTS alone with --no-cross-pass), so that "at most 3 GSD" holds for 95 % of the seabed, not the median.
-  json.set("return_misalignment_gsd", cross_pass ? mis_cross.p95_gsd : mis_smoothed.p95_gsd);
+  json["return_misalignment_gsd"] = cross_pass ? mis_cross.p95_gsd : mis_smoothed.p95_gsd;
   // nees_in_bounds_fraction: the Monte Carlo test (the NEES averaged over the runs at each epoch against the
   // chi-square bounds of 2R dof); the single dive's per-epoch fraction is kept beside it.
-  json.set("nees_in_bounds_fraction", monte_carlo_runs > 0 ? double(mc_in) / std::max(1, mc_epochs) : std::nan(""));
-  json.set("nees_monte_carlo_runs", monte_carlo_runs);
-  json.set("nees_monte_carlo_mean", mc_nees_mean);
-  json.set("nees_monte_carlo_along_track_mean", mc_along_mean);
-  json.set("nees_monte_carlo_cross_track_mean", mc_cross_mean);
-  json.set("monte_carlo_common_error_fraction", mc_common_fraction);
-  json.set("nees_monte_carlo_bounds_low", mc_low);
-  json.set("nees_monte_carlo_bounds_high", mc_high);
-  json.set("nees_monte_carlo_below_fraction", double(mc_below) / std::max(1, mc_epochs));
-  json.set("nees_monte_carlo_above_fraction", double(mc_above) / std::max(1, mc_epochs));
-  json.set("monte_carlo_rmse_filtered_mean_m", mean_of(mc_rmse_filtered));
-  json.set("monte_carlo_rmse_nav_only_mean_m", mean_of(mc_rmse_nav));
-  json.set("monte_carlo_filtered_over_better_single_mean", mean_of(mc_ratio));
-  json.set("monte_carlo_filtered_over_better_single_p90", monte_carlo_runs > 0 ? percentile(mc_ratio, 0.9) : 0.0);
-  json.set("monte_carlo_seconds", mc_seconds);
-  json.set("nees_single_dive_in_bounds_fraction", double(nees_in) / nees_count);
-  json.set("nees_mean", nees_sum / nees_count);
-  json.set("nees_below_fraction", double(nees_below) / nees_count);
-  json.set("nees_above_fraction", double(nees_above) / nees_count);
-  json.set("true_heading_error_end_rad", true_heading_error_end);
-  json.set("estimated_heading_error_end_rad", all.last.heading_error_rad);
-  json.set("estimated_heading_error_end_sigma_rad", all.last.heading_error_sigma_rad);
-  json.set("nees_smoothed_mean", smoothed_nees_sum / nees_count);
-  json.set("usbl_fixes", double(usbl_errors.size()));
-  json.set("usbl_outliers", usbl_outliers);
-  json.set("gated_fixes", all.fixes_rejected_final);
-  json.set("gated_fixes_at_arrival", all.fixes_rejected_at_arrival);
-  json.set("recoveries", all.recoveries);
-  json.set("filter_events", all.events);
-  json.set("filter_updates_per_s", updates_per_s);
-  json.set("filter_rewinds", double(all.rewinds));
-  json.set("rts_seconds", all.smoother_seconds);
-  json.set("bench_seconds", secondsSince(bench_start));
+  json["nees_in_bounds_fraction"] = monte_carlo_runs > 0 ? double(mc_in) / std::max(1, mc_epochs) : std::nan("");
+  json["nees_monte_carlo_runs"] = monte_carlo_runs;
+  json["nees_monte_carlo_mean"] = mc_nees_mean;
+  json["nees_monte_carlo_along_track_mean"] = mc_along_mean;
+  json["nees_monte_carlo_cross_track_mean"] = mc_cross_mean;
+  json["monte_carlo_common_error_fraction"] = mc_common_fraction;
+  json["nees_monte_carlo_bounds_low"] = mc_low;
+  json["nees_monte_carlo_bounds_high"] = mc_high;
+  json["nees_monte_carlo_below_fraction"] = double(mc_below) / std::max(1, mc_epochs);
+  json["nees_monte_carlo_above_fraction"] = double(mc_above) / std::max(1, mc_epochs);
+  json["monte_carlo_rmse_filtered_mean_m"] = mean_of(mc_rmse_filtered);
+  json["monte_carlo_rmse_nav_only_mean_m"] = mean_of(mc_rmse_nav);
+  json["monte_carlo_filtered_over_better_single_mean"] = mean_of(mc_ratio);
+  json["monte_carlo_filtered_over_better_single_p90"] = monte_carlo_runs > 0 ? percentile(mc_ratio, 0.9) : 0.0;
+  json["monte_carlo_seconds"] = mc_seconds;
+  json["nees_single_dive_in_bounds_fraction"] = double(nees_in) / nees_count;
+  json["nees_mean"] = nees_sum / nees_count;
+  json["nees_below_fraction"] = double(nees_below) / nees_count;
+  json["nees_above_fraction"] = double(nees_above) / nees_count;
+  json["true_heading_error_end_rad"] = true_heading_error_end;
+  json["estimated_heading_error_end_rad"] = all.last.heading_error_rad;
+  json["estimated_heading_error_end_sigma_rad"] = all.last.heading_error_sigma_rad;
+  json["nees_smoothed_mean"] = smoothed_nees_sum / nees_count;
+  json["usbl_fixes"] = double(usbl_errors.size());
+  json["usbl_outliers"] = usbl_outliers;
+  json["gated_fixes"] = all.fixes_rejected_final;
+  json["gated_fixes_at_arrival"] = all.fixes_rejected_at_arrival;
+  json["recoveries"] = all.recoveries;
+  json["filter_events"] = all.events;
+  json["filter_updates_per_s"] = updates_per_s;
+  json["filter_rewinds"] = double(all.rewinds);
+  json["rts_seconds"] = all.smoother_seconds;
+  json["bench_seconds"] = secondsSince(bench_start);
   std::error_code error;
   std::filesystem::create_directories(out_dir, error);
   const std::string path = out_dir + "/fusion.json";
-  if (!json.write(path)) {
-    std::cerr << "bench_fusion: cannot write " << path << "\n";
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_fusion: " << e.what() << "\n";
     return 1;
   }
   // Every track at every frame, against the truth, for plots and for diagnosing where the error comes from.

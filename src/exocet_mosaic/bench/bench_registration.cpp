@@ -6,7 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iomanip>
 #include <iostream>
@@ -18,6 +17,7 @@
 
 #include <time.h>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -30,7 +30,9 @@
 #include "exocet_mosaic/registration/sift_reference.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/image_motion_truth.h"
+#include "exocet_common/json_file.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
+#include "exocet_common/command_line.h"
 #include "shared_data.h"
 
 namespace {
@@ -224,57 +226,12 @@ SequenceScore peerScore(const std::vector<cv::Mat>& frames, const std::vector<Ei
   return summarize(pairs);
 }
 
-struct Json {
-  std::map<std::string, std::string> values;
-  void set(const std::string& key, double v) {
-    std::ostringstream s;
-    if (std::isfinite(v))
-      s << std::setprecision(6) << v;
-    else
-      s << "null";
-    values[key] = s.str();
-  }
-  void setText(const std::string& key, const std::string& v) { values[key] = "\"" + v + "\""; }
-  /// Keeps the keys of an existing file (bench_registration_node adds node_peak_rss_mb).
-  void merge(const std::string& path) {
-    std::ifstream in(path);
-    std::string line;
-    while (std::getline(in, line)) {
-      const size_t q1 = line.find('"'), q2 = line.find('"', q1 + 1), colon = line.find(':', q2 + 1);
-      if (q1 == std::string::npos || q2 == std::string::npos || colon == std::string::npos) continue;
-      const std::string key = line.substr(q1 + 1, q2 - q1 - 1);
-      std::string value = line.substr(colon + 1);
-      while (!value.empty() && (value.back() == ',' || value.back() == ' ')) value.pop_back();
-      while (!value.empty() && value.front() == ' ') value.erase(value.begin());
-      if (!values.count(key)) values[key] = value;
-    }
-  }
-  bool write(const std::string& path) const {
-    std::ofstream out(path);
-    out << "{\n";
-    size_t i = 0;
-    for (const auto& [k, v] : values) out << "  \"" << k << "\": " << v << (++i < values.size() ? ",\n" : "\n");
-    out << "}\n";
-    return bool(out);
-  }
-};
-
 void printRow(const std::string& name, const SequenceScore& s, double fps, double ratio_ecc, double ratio_features) {
   std::cout << std::left << std::setw(30) << name << std::right << std::fixed << std::setprecision(3) << std::setw(9)
             << s.median_px << std::setw(9) << s.p95_px << std::setprecision(2) << std::setw(9) << 100.0 * s.failure_rate
             << std::setw(9) << 100.0 * s.gross_failure_rate << std::setprecision(0) << std::setw(9) << fps;
   if (ratio_ecc > 0) std::cout << std::setprecision(1) << std::setw(9) << ratio_ecc << std::setw(9) << ratio_features;
   std::cout << "\n";
-}
-
-/// Splits "a,b,c".
-std::set<std::string> splitList(const std::string& text) {
-  std::set<std::string> items;
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ','))
-    if (!item.empty()) items.insert(item);
-  return items;
 }
 
 /// Score of the pairs of `all` that `select` keeps (the registrar already ran over the whole sequence).
@@ -285,53 +242,49 @@ SequenceScore subset(const SequenceScore& all, const std::function<bool(int)>& s
   return summarize(pairs);
 }
 
-const char* kUsage =
-    "usage: bench_registration [--output-dir DIR] [--shared-data DIR] [--frames N] [--only PARTS] [--methods KEYS]\n"
-    "  --only PARTS   comma-separated subset of accuracy (simulated dive and Sparus), peers (OpenCV ECC and ORB),\n"
-    "                 speed (ours, one thread, PAL and HD); default all. Keys not measured keep their value in\n"
-    "                 DIR/registration.json.\n"
-    "  --methods KEYS comma-separated subset of klt, rmr, auto, klt_similarity, rmr_similarity, klt_affine,\n"
-    "                 rmr_affine (accuracy), and of klt, rmr, auto (speed); default all.\n";
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string out_dir = "out/bench", shared = "../shared/data", config_dir = EXOCET_CONFIG_DIR;
+  exocet_common::BenchmarkPaths paths;
+  const std::string config_dir = EXOCET_CONFIG_DIR;
   int frames_limit = 0;
-  std::set<std::string> parts = {"accuracy", "peers", "speed"}, methods;
-  for (int i = 1; i < argc; i += 2) {
-    const std::string a = argv[i];
-    if (i + 1 >= argc) {
-      std::cerr << "bench_registration: " << a << " needs a value\n" << kUsage;
-      return 2;
-    }
-    if (a == "--output-dir")
-      out_dir = argv[i + 1];
-    else if (a == "--shared-data")
-      shared = argv[i + 1];
-    else if (a == "--frames")
-      frames_limit = std::stoi(argv[i + 1]);
-    else if (a == "--only")
-      parts = splitList(argv[i + 1]);
-    else if (a == "--methods")
-      methods = splitList(argv[i + 1]);
-    else {
-      std::cerr << kUsage;
-      return 2;
-    }
-  }
-  for (const std::string& part : parts)
-    if (part != "accuracy" && part != "peers" && part != "speed") {
-      std::cerr << "bench_registration: unknown part '" << part << "' in --only\n" << kUsage;
-      return 2;
-    }
+  std::vector<std::string> part_list = {"accuracy", "peers", "speed"}, method_list;
+  CLI::App app(
+      "bench_registration: accuracy and speed of the frame-to-frame registration (KLT, RMR, auto) on a\n"
+      "simulated dive and the Sparus AUV frames, beside OpenCV's ECC and an ORB feature pipeline.\n"
+      "Writes OUTPUT_DIR/registration.json; keys not measured keep their value in that file.",
+      "bench_registration");
+  exocet_common::addBenchmarkPathOptions(app, &paths);
+  app.add_option("--frames", frames_limit, "frames of the simulated dive (0: all)")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(0))
+      ->capture_default_str();
+  app.add_option("--only", part_list,
+                 "comma-separated subset of accuracy (simulated dive and Sparus), peers (OpenCV ECC\n"
+                 "and ORB), speed (ours, one thread, PAL and HD); default all")
+      ->type_name("PARTS")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"accuracy", "peers", "speed"}));
+  app.add_option("--methods", method_list,
+                 "comma-separated subset of klt, rmr, auto, klt_similarity, rmr_similarity, klt_affine,\n"
+                 "rmr_affine (accuracy), and of klt, rmr, auto (speed); default all")
+      ->type_name("KEYS")
+      ->delimiter(',');
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& out_dir = paths.output_dir;
+  const std::string& shared = paths.shared_data;
+  const std::set<std::string> parts(part_list.begin(), part_list.end());
+  std::set<std::string> methods;
+  for (const std::string& m : method_list)
+    if (!m.empty()) methods.insert(m);
   const bool accuracy = parts.count("accuracy"), peers = parts.count("peers"), timing = parts.count("speed");
   auto wanted = [&methods](const std::string& key) { return methods.empty() || methods.count(key) > 0; };
   cv::setNumThreads(1);
   std::cout << std::unitbuf;  // progress lines appear as they happen, also when redirected to a file
   std::filesystem::create_directories(out_dir);
-  Json json;
-  json.merge(out_dir + "/registration.json");
+  // Keys this run does not measure keep their value (bench_registration_node adds node_peak_rss_mb and node_fps_pal).
+  nlohmann::json json = exocet_common::readJsonObjectFile<nlohmann::json>(out_dir + "/registration.json")
+                            .value_or(nlohmann::json::object());
 
   // ---- 1. Accuracy on the simulated dive ----
   std::vector<std::string> overrides;
@@ -369,22 +322,22 @@ int main(int argc, char** argv) {
       // The segments are scored on the same run: the registrar's state is that of the whole dive.
       const SequenceScore s_dark = subset(s, [&](int i) { return pal.light_gain[i] < 1.0; });
       const SequenceScore s_turbid = subset(s, [&](int i) { return pal.turbidity[i] > 1.0; });
-      json.set(c.key + "_median_px", s.median_px);
-      json.set(c.key + "_p95_px", s.p95_px);
-      json.set(c.key + "_failure_rate", s.failure_rate);
-      json.set(c.key + "_gross_failure_rate", s.gross_failure_rate);
-      json.set(c.key + "_nees_ratio", s.nees_ratio);
-      json.set(c.key + "_dark_median_px", s_dark.median_px);
-      json.set(c.key + "_turbid_median_px", s_turbid.median_px);
+      json[c.key + "_median_px"] = s.median_px;
+      json[c.key + "_p95_px"] = s.p95_px;
+      json[c.key + "_failure_rate"] = s.failure_rate;
+      json[c.key + "_gross_failure_rate"] = s.gross_failure_rate;
+      json[c.key + "_nees_ratio"] = s.nees_ratio;
+      json[c.key + "_dark_median_px"] = s_dark.median_px;
+      json[c.key + "_turbid_median_px"] = s_turbid.median_px;
       std::cout << c.key << ": median " << s.median_px << " px, p95 " << s.p95_px << " px, max " << s.max_px
                 << ", failed " << s.failures << ", gross " << s.gross_failures << ", NEES ratio " << s.nees_ratio
                 << "; dark median " << s_dark.median_px << " (" << s_dark.failures << " failed), turbid median "
                 << s_turbid.median_px << " (" << s_turbid.failures << " failed); " << run_s << " s\n";
     }
-    json.set("dive_pairs", double(pal.gray.size() - 1));
+    json["dive_pairs"] = double(pal.gray.size() - 1);
     if (scores.count("klt") && scores.count("rmr"))
-      json.set("gross_failure_rate", std::max(scores["klt"].gross_failure_rate, scores["rmr"].gross_failure_rate));
-    if (scores.count("auto")) json.set("auto_gross_failure_rate", scores["auto"].gross_failure_rate);
+      json["gross_failure_rate"] = std::max(scores["klt"].gross_failure_rate, scores["rmr"].gross_failure_rate);
+    if (scores.count("auto")) json["auto_gross_failure_rate"] = scores["auto"].gross_failure_rate;
   }
 
   // Peers on every 5th pair (they are slow).
@@ -394,16 +347,16 @@ int main(int argc, char** argv) {
     ecc = peerScore(pal.gray, truth, 5, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
     features =
         peerScore(pal.gray, truth, 5, [&](const cv::Mat& a, const cv::Mat& b) { return orbPartialAffine(a, b, orb); });
-    json.set("ecc_median_px", ecc.median_px);
-    json.set("ecc_p95_px", ecc.p95_px);
-    json.set("ecc_failure_rate", ecc.failure_rate);
-    json.set("ecc_gross_failure_rate", ecc.gross_failure_rate);
-    json.set("features_median_px", features.median_px);
-    json.set("features_p95_px", features.p95_px);
-    json.set("features_failure_rate", features.failure_rate);
-    json.set("features_gross_failure_rate", features.gross_failure_rate);
-    json.set("ecc_fps_pal", ecc.fps);
-    json.set("features_fps_pal", features.fps);
+    json["ecc_median_px"] = ecc.median_px;
+    json["ecc_p95_px"] = ecc.p95_px;
+    json["ecc_failure_rate"] = ecc.failure_rate;
+    json["ecc_gross_failure_rate"] = ecc.gross_failure_rate;
+    json["features_median_px"] = features.median_px;
+    json["features_p95_px"] = features.p95_px;
+    json["features_failure_rate"] = features.failure_rate;
+    json["features_gross_failure_rate"] = features.gross_failure_rate;
+    json["ecc_fps_pal"] = ecc.fps;
+    json["features_fps_pal"] = features.fps;
     std::cout << "ECC affine: median " << ecc.median_px << " px, p95 " << ecc.p95_px << ", " << ecc.fps
               << " pairs/s; ORB: median " << features.median_px << " px, p95 " << features.p95_px << ", "
               << features.fps << " pairs/s\n";
@@ -434,8 +387,8 @@ int main(int argc, char** argv) {
     for (const Timed& t : timed) {
       if (!wanted(t.key.substr(0, t.key.find('_')))) continue;
       fps[t.key] = speed(t.method, t.model, pal_clip, pal_clip_stamps_s, t.seconds);
-      json.set(t.key + "_fps_pal", fps[t.key].wall_fps);
-      json.set(t.key + "_fps_pal_cpu", fps[t.key].cpu_fps);
+      json[t.key + "_fps_pal"] = fps[t.key].wall_fps;
+      json[t.key + "_fps_pal_cpu"] = fps[t.key].cpu_fps;
       printSpeed(t.key + " PAL", fps[t.key]);
     }
 
@@ -445,8 +398,8 @@ int main(int argc, char** argv) {
     for (const Timed& t : timed) {
       if (t.key == "auto" || !wanted(t.key.substr(0, t.key.find('_')))) continue;
       const Speed s = speed(t.method, t.model, hd.gray, hd.stamps_s, 3.0);
-      json.set(t.key + "_fps_hd", s.wall_fps);
-      json.set(t.key + "_fps_hd_cpu", s.cpu_fps);
+      json[t.key + "_fps_hd"] = s.wall_fps;
+      json[t.key + "_fps_hd_cpu"] = s.cpu_fps;
       printSpeed(t.key + " HD", s);
     }
   }
@@ -458,7 +411,7 @@ int main(int argc, char** argv) {
     // Every 50th pair of the HD clip: ECC runs about one pair per second there.
     const SequenceScore hd_ecc =
         peerScore(hd.gray, hd_truth, 50, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
-    json.set("ecc_fps_hd", hd_ecc.fps);
+    json["ecc_fps_hd"] = hd_ecc.fps;
     std::cout << "ECC affine HD: " << hd_ecc.fps << " pairs/s\n";
   }
 
@@ -490,13 +443,13 @@ int main(int argc, char** argv) {
         const double worst = errors.empty() ? std::nan("") : errors.back();
         const double median = errors.empty() ? std::nan("") : errors[errors.size() / 2];
         sparus_max = std::max(sparus_max, worst);
-        json.set("sparus_" + key + "_max_corner_px", worst);
-        json.set("sparus_" + key + "_median_corner_px", median);
-        json.set("sparus_" + key + "_failures", failed);
+        json["sparus_" + key + "_max_corner_px"] = worst;
+        json["sparus_" + key + "_median_corner_px"] = median;
+        json["sparus_" + key + "_failures"] = failed;
         std::cout << "sparus " << key << ": " << errors.size() << " pairs, corner difference to SIFT+RANSAC median "
                   << median << " px, max " << worst << " px, " << failed << " failed\n";
       }
-      if (wanted("klt") && wanted("rmr")) json.set("sparus_max_corner_px", sparus_max);
+      if (wanted("klt") && wanted("rmr")) json["sparus_max_corner_px"] = sparus_max;
     } else {
       std::cout << "sparus: no frames under " << shared << "/sparus_auv/frames\n";
     }
@@ -527,8 +480,10 @@ int main(int argc, char** argv) {
   }
 
   const std::string path = out_dir + "/registration.json";
-  if (!json.write(path)) {
-    std::cerr << "bench_registration: cannot write " << path << "\n";
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_registration: " << e.what() << "\n";
     return 1;
   }
   std::cout << "wrote " << path << "\n";

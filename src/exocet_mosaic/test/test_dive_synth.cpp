@@ -376,7 +376,7 @@ TEST(DiveSynthTool, BadInputsExitWithAClearErrorAndLeaveNoOutput) {
       {"--seabed-image " + dir + "/missing.png", 1, "missing.png"},
       {"--set 'imaging.segments=[{start_s: 9, end_s: 3}]'", 2, "end_s"},
       {"--set camera.fps=-5", 2, "camera.fps"},
-      {"--frobnicate", 2, "unknown argument"},
+      {"--frobnicate", 2, "not expected: --frobnicate"},
   };
   for (const Case& c : cases) {
     std::string err;

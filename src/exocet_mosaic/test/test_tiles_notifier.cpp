@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include <cpl_json.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include "exocet_common/testing/temp_dir.h"
@@ -28,7 +29,6 @@
 namespace fs = std::filesystem;
 using exocet_mosaic::tiles::GeoTiffTileWriter;
 using exocet_mosaic::tiles::jsonNumber;
-using exocet_mosaic::tiles::jsonString;
 using exocet_mosaic::tiles::TileMetadata;
 using exocet_mosaic::tiles::TileNotifier;
 using exocet_mosaic::tiles::TileRaster;
@@ -228,20 +228,36 @@ TEST(TilesNotifier, OversizedDatagramIsRefused) {
 }
 
 TEST(TilesJson, StringsAreEscapedAndAlwaysValidUtf8) {
-  EXPECT_EQ(jsonString("plain"), "\"plain\"");
-  EXPECT_EQ(jsonString("a\"b\\c/d"), "\"a\\\"b\\\\c/d\"");
-  EXPECT_EQ(jsonString("l1\nl2\tt\r\b\f"), "\"l1\\nl2\\tt\\r\\b\\f\"");
-  EXPECT_EQ(jsonString(std::string("nul\0x\x01\x1f", 7)), "\"nul\\u0000x\\u0001\\u001f\"");
-  EXPECT_EQ(jsonString("caf\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x90\x9F"), "\"caf\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x90\x9F\"");
-  EXPECT_EQ(jsonString("latin1 caf\xE9!"), "\"latin1 caf\\ufffd!\"");         // not UTF-8
-  EXPECT_EQ(jsonString("overlong \xC0\xAF"), "\"overlong \\ufffd\\ufffd\"");  // '/' in two bytes
-  EXPECT_EQ(jsonString("cut \xE2\x82"), "\"cut \\ufffd\\ufffd\"");
-  EXPECT_EQ(jsonString("surrogate \xED\xA0\x80"), "\"surrogate \\ufffd\\ufffd\\ufffd\"");
-  // And GDAL's parser reads them back.
+  const char kNasty[] = "q\"b\\s/\n\t\r\b\f nul\0x\x01\x1f caf\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x90\x9F";
+  const std::string nasty(kNasty, sizeof(kNasty) - 1);
+  WrittenTile tile;
+  tile.metadata.dive_name = nasty;
+  tile.metadata.extra["latin1"] = "latin1 caf\xE9!";      // not UTF-8
+  tile.metadata.extra["overlong"] = "overlong \xC0\xAF";  // '/' in two bytes
+  tile.metadata.extra["cut"] = "cut \xE2\x82";
+  tile.metadata.extra["surrogate"] = "surrogate \xED\xA0\x80";
+  const std::string text = tileToJson(tile);
+  EXPECT_EQ(text.find('\n'), std::string::npos) << "one line";
+  EXPECT_NE(text.find("\"q\\\"b\\\\s/\\n\\t\\r\\b\\f nul\\u0000x\\u0001\\u001f caf\xC3\xA9 \xE2\x82\xAC"),
+            std::string::npos)
+      << text;
+  // Read back (the parser refuses invalid UTF-8): the escapes give the text back, NUL included.
+  nlohmann::json parsed;
+  ASSERT_NO_THROW(parsed = nlohmann::json::parse(text)) << text;
+  EXPECT_EQ(parsed["dive_name"], nasty);
+  // GDAL's parser too; the bytes that are not UTF-8 became U+FFFD, and nothing else changed.
   CPLJSONDocument document;
-  const std::string nasty = std::string("q\"b\\s\n\x01 caf\xC3\xA9", 13);
-  ASSERT_TRUE(document.LoadMemory("{\"k\":" + jsonString(nasty) + "}"));
-  EXPECT_EQ(document.GetRoot().GetString("k"), nasty);
+  ASSERT_TRUE(document.LoadMemory(text)) << text;
+  const CPLJSONObject json = document.GetRoot();
+  EXPECT_EQ(json.GetString("dive_name"), nasty.substr(0, nasty.find('\0')));  // a C string: up to the NUL
+  EXPECT_EQ(json.GetObj("extra").GetString("latin1"), "latin1 caf\xEF\xBF\xBD!");
+  for (const std::string key : {"overlong", "cut", "surrogate"}) {
+    const std::string value = json.GetObj("extra").GetString(key);
+    ASSERT_EQ(value.rfind(key + " ", 0), 0u) << value;
+    const std::string replaced = value.substr(key.size() + 1);
+    ASSERT_FALSE(replaced.empty()) << key;
+    for (size_t i = 0; i < replaced.size(); i += 3) EXPECT_EQ(replaced.substr(i, 3), "\xEF\xBF\xBD") << key;
+  }
 }
 
 TEST(TilesJson, NumbersRoundTripAndNonFiniteIsNull) {

@@ -8,10 +8,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -21,7 +19,10 @@
 #include <visp3/visual_features/vpFeatureBuilder.h>
 #include <visp3/visual_features/vpFeaturePoint.h>
 #include <visp3/vs/vpServo.h>
+#include <nlohmann/json.hpp>
 
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 #include "exocet_servo/control/invariant_servo.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/pose_bound.h"
@@ -171,21 +172,18 @@ struct Stats {
   }
 };
 
-std::string num(double v, int prec = 4) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s.precision(prec);
-  s << v;
-  return s.str();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output_dir = "out/bench";
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::string(argv[i]) == "--output-dir") output_dir = argv[i + 1];
-  }
+  exocet_common::BenchmarkPaths paths;
+  CLI::App app(
+      "bench_servo: the intrinsics-free servo at point level against classical IBVS (ViSP), the circular\n"
+      "acquisition against the screw prediction, and the rate of one control-law step.\n"
+      "Writes OUTPUT_DIR/servo.json (its image-level figures are null until bench_servo_image fills them).",
+      "bench_servo");
+  exocet_common::addBenchmarkPathOptions(app, &paths, false);
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& output_dir = paths.output_dir;
   const Scene scene = makeScene(100);
   const auto starts = startPoses(scene.start);
   const double noise_px = 0.5;
@@ -339,45 +337,45 @@ int main(int argc, char** argv) {
 
   std::filesystem::create_directories(output_dir);
   const std::string path = output_dir + "/servo.json";
-  std::ofstream out(path);
-  if (!out) {
-    std::cerr << "bench_servo: cannot write " << path << "\n";
+  nlohmann::ordered_json json;
+  json["final_pos_err_mm"] = inv.pos_mean;
+  json["final_rot_err_deg"] = inv.rot_mean;
+  json["iterations"] = inv.iter_mean;
+  json["final_pos_err_mm_max"] = inv.pos_max;
+  json["final_rot_err_deg_max"] = inv.rot_max;
+  json["final_pos_err_mm_noise_free"] = inv_exact.pos_max;
+  json["final_rot_err_deg_noise_free"] = inv_exact.rot_max;
+  json["iterations_noise_free"] = inv_exact.iter_mean;
+  json["pose_bound_intrinsics_unknown_mm"] = bound.position_rms_mm();
+  json["pose_bound_intrinsics_unknown_deg"] = bound.rotation_rms_deg();
+  json["pose_bound_intrinsics_known_mm"] = bound_cal.position_rms_mm();
+  json["pose_bound_intrinsics_known_deg"] = bound_cal.rotation_rms_deg();
+  json["ibvs_final_pos_err_mm"] = ibvs.pos_mean;
+  json["ibvs_final_rot_err_deg"] = ibvs.rot_mean;
+  json["ibvs_desired_final_pos_err_mm"] = ibvs_desired.pos_mean;
+  json["ibvs_desired_final_rot_err_deg"] = ibvs_desired.rot_mean;
+  json["visp_tutorial_iterations"] = tutorial_iterations;
+  json["trajectory_prediction_err_mm"] = pred_err_max;
+  json["trajectory_prediction_err_mm_noise_free"] = pred_err_exact_max;
+  json["circle_drift_mm"] = drift;
+  json["circle_drift_mm_noise_free"] = drift_exact;
+  json["trajectory_prediction_err_mm_1000_points"] = pred_err_dense_max;
+  json["circle_drift_mm_1000_points"] = drift_dense;
+  nlohmann::ordered_json by_points = nlohmann::ordered_json::object();
+  for (const auto& [points, rms_mm] : pos_by_points) by_points[std::to_string(points)] = rms_mm;
+  json["final_pos_err_mm_rms_by_points"] = by_points;
+  json["control_law_rate_hz"] = rate_200;
+  json["control_law_points"] = 200;
+  // The image-level figures are bench_servo_image's, which fills them in.
+  json["image_loop_pos_err_mm"] = nullptr;
+  json["image_loop_rot_err_deg"] = nullptr;
+  json["control_rate_hz"] = nullptr;
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_servo: " << e.what() << "\n";
     return 1;
   }
-  out << "{\n"
-      << "  \"final_pos_err_mm\": " << num(inv.pos_mean) << ",\n"
-      << "  \"final_rot_err_deg\": " << num(inv.rot_mean) << ",\n"
-      << "  \"iterations\": " << num(inv.iter_mean) << ",\n"
-      << "  \"final_pos_err_mm_max\": " << num(inv.pos_max) << ",\n"
-      << "  \"final_rot_err_deg_max\": " << num(inv.rot_max) << ",\n"
-      << "  \"final_pos_err_mm_noise_free\": " << num(inv_exact.pos_max) << ",\n"
-      << "  \"final_rot_err_deg_noise_free\": " << num(inv_exact.rot_max) << ",\n"
-      << "  \"iterations_noise_free\": " << num(inv_exact.iter_mean) << ",\n"
-      << "  \"pose_bound_intrinsics_unknown_mm\": " << num(bound.position_rms_mm()) << ",\n"
-      << "  \"pose_bound_intrinsics_unknown_deg\": " << num(bound.rotation_rms_deg()) << ",\n"
-      << "  \"pose_bound_intrinsics_known_mm\": " << num(bound_cal.position_rms_mm()) << ",\n"
-      << "  \"pose_bound_intrinsics_known_deg\": " << num(bound_cal.rotation_rms_deg()) << ",\n"
-      << "  \"ibvs_final_pos_err_mm\": " << num(ibvs.pos_mean) << ",\n"
-      << "  \"ibvs_final_rot_err_deg\": " << num(ibvs.rot_mean) << ",\n"
-      << "  \"ibvs_desired_final_pos_err_mm\": " << num(ibvs_desired.pos_mean) << ",\n"
-      << "  \"ibvs_desired_final_rot_err_deg\": " << num(ibvs_desired.rot_mean) << ",\n"
-      << "  \"visp_tutorial_iterations\": " << tutorial_iterations << ",\n"
-      << "  \"trajectory_prediction_err_mm\": " << num(pred_err_max) << ",\n"
-      << "  \"trajectory_prediction_err_mm_noise_free\": " << num(pred_err_exact_max) << ",\n"
-      << "  \"circle_drift_mm\": " << num(drift) << ",\n"
-      << "  \"circle_drift_mm_noise_free\": " << num(drift_exact) << ",\n"
-      << "  \"trajectory_prediction_err_mm_1000_points\": " << num(pred_err_dense_max) << ",\n"
-      << "  \"circle_drift_mm_1000_points\": " << num(drift_dense) << ",\n"
-      << "  \"final_pos_err_mm_rms_by_points\": {";
-  for (size_t i = 0; i < pos_by_points.size(); ++i)
-    out << (i ? ", " : "") << "\"" << pos_by_points[i].first << "\": " << num(pos_by_points[i].second);
-  out << "},\n"
-      << "  \"control_law_rate_hz\": " << num(rate_200, 6) << ",\n"
-      << "  \"control_law_points\": 200,\n"
-      << "  \"image_loop_pos_err_mm\": null,\n"
-      << "  \"image_loop_rot_err_deg\": null,\n"
-      << "  \"control_rate_hz\": null\n"
-      << "}\n";
   printf("\nwrote %s\n", path.c_str());
   return 0;
 }

@@ -13,12 +13,14 @@
 #include <fstream>
 #include <iostream>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 #include "exocet_servo/control/image_servo_controller.h"
 #include "exocet_servo/control/twist_limit.h"
 #include "exocet_servo/sim/arm_rig_simulator.h"
@@ -32,33 +34,6 @@ namespace {
 
 using namespace exocet_servo;
 using Clock = std::chrono::steady_clock;
-
-std::string num(double v, int prec = 5) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s.precision(prec);
-  s << v;
-  return s.str();
-}
-
-/// A JSON string literal (quotes included): statuses quote names and carry any character.
-std::string jsonString(const std::string& text) {
-  std::ostringstream s;
-  s << '"';
-  for (const char c : text) {
-    if (c == '"' || c == '\\') {
-      s << '\\' << c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char buffer[8];
-      std::snprintf(buffer, sizeof(buffer), "\\u%04x", static_cast<unsigned char>(c));
-      s << buffer;
-    } else {
-      s << c;
-    }
-  }
-  s << '"';
-  return s.str();
-}
 
 /// Start poses 5-10 cm and 5-10 deg from the reference, in random directions (fixed seed).
 std::vector<Eigen::Isometry3d> startPoses(const Eigen::Isometry3d& reference, int count) {
@@ -306,10 +281,15 @@ ArmSection armSection() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output_dir = "out/bench";
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::string(argv[i]) == "--output-dir") output_dir = argv[i + 1];
-  }
+  exocet_common::BenchmarkPaths paths;
+  CLI::App app(
+      "bench_servo_image: the image-level intrinsics-free servo on a rendered vent (SIFT, KLT, rendered\n"
+      "depths), its control rate on one core, and the circular acquisition through the arm and free-flying.\n"
+      "Writes OUTPUT_DIR/servo_image.json and fills the image-level figures of OUTPUT_DIR/servo.json.",
+      "bench_servo_image");
+  exocet_common::addBenchmarkPathOptions(app, &paths, false);
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& output_dir = paths.output_dir;
   cv::setNumThreads(1);  // the control rate is measured on one core; rendering then also runs on one
 
   const auto t_scene = Clock::now();
@@ -510,108 +490,100 @@ int main(int argc, char** argv) {
       free_drift_max_mm, free_closure_mm, free_closure_deg, free_circle_s);
 
   const std::string path = output_dir + "/servo_image.json";
-  std::ofstream out(path);
-  if (!out) {
-    std::cerr << "bench_servo_image: cannot write " << path << "\n";
+  nlohmann::ordered_json json;
+  json["image_loop_pos_err_mm"] = pos_sum / n;
+  json["image_loop_rot_err_deg"] = rot_sum / n;
+  json["image_loop_iterations"] = iter_sum / n;
+  json["image_loop_pos_err_mm_max"] = pos_max;
+  json["image_loop_rot_err_deg_max"] = rot_max;
+  json["image_loop_converged"] = converged;
+  json["image_loop_pos_err_mm_without_anchoring"] = pos_na / n;
+  json["image_loop_rot_err_deg_without_anchoring"] = rot_na / n;
+  json["image_loop_converged_without_anchoring"] = converged_na;
+  json["image_loop_runs"] = starts.size();
+  json["control_rate_hz"] = rate_hz;
+  json["control_cpu_ms_mean"] = 1e3 * cpu_mean;
+  json["control_cpu_ms_max"] = 1e3 * cpu_max;
+  json["control_rate_hz_wall"] = wall_rate_hz;
+  json["control_wall_ms_mean"] = 1e3 * control_mean;
+  json["control_wall_ms_max"] = 1e3 * control_max;
+  json["load_average"] = load[0];
+  json["control_points_mean"] = control_n > 0 ? static_cast<double>(points_sum) / control_n : NAN;
+  json["sift_match_ms_mean"] = match_n > 0 ? 1e3 * match_sum / match_n : NAN;
+  json["arm_circle_servoings"] = run.drift_mm.size();
+  json["arm_circle_status"] = run.status;
+  json["arm_circle_images"] = run.images;
+  json["arm_circle_drift_end_mm"] = circle_drift_end_mm;
+  json["arm_circle_drift_end_deg"] = run.drift_deg.empty() ? NAN : run.drift_deg.back();
+  json["arm_circle_placement_m"] = {arm.placement.axis_base_m.x(), arm.placement.axis_base_m.y(),
+                                    arm.placement.axis_base_m.z()};
+  json["arm_circle_start_azimuth_deg"] = arm.placement.start_azimuth_rad * 180.0 / M_PI;
+  json["arm_circle_min_sigma"] = arm.placement.found ? arm.placement.report.worst_sigma_min : NAN;
+  json["arm_circle_min_joint_margin_rad"] = arm.placement.found ? arm.placement.report.worst_joint_margin_rad : NAN;
+  json["arm_circle_feasible_servoings"] = arm.placed_check.feasible_steps;
+  json["arm_circle_min_sigma_run"] = run.min_sigma_all;
+  json["arm_circle_quarter_drift_mm"] = quarter_drift_mm;
+  json["arm_circle_quarter_drift_deg"] = quarter_drift_deg;
+  json["arm_circle_search_s"] = arm.search_s;
+  json["arm_circle_max_feasible_servoings_any_placement"] = arm.max_feasible_any_placement;
+  json["arm_circle_default_feasible_servoings"] = arm.default_check.feasible_steps;
+  json["arm_circle_default_min_sigma"] = arm.default_check.worst_sigma_min;
+  json["arm_circle_default_servoings"] = arm.default_run.drift_mm.size();
+  json["arm_circle_default_status"] = arm.default_run.status;
+  json["arm_circle_default_min_sigma_run"] = arm.default_run.min_sigma_all;
+  json["arm_circle_default_drift_end_mm"] = arm.default_run.drift_mm.empty() ? NAN : arm.default_run.drift_mm.back();
+  json["circle_servoings"] = free_drift_mm.size();
+  json["circle_drift_end_mm"] = free_drift_mm.empty() ? NAN : free_drift_mm.back();
+  json["circle_drift_end_deg"] = free_drift_deg.empty() ? NAN : free_drift_deg.back();
+  json["circle_drift_max_mm"] = free_drift_max_mm;
+  json["circle_closure_mm"] = free_closure_mm;
+  json["circle_closure_deg"] = free_closure_deg;
+  json["circle_images"] = free_images;
+  json["circle_status"] = free_status;
+  json["circle_seconds"] = free_circle_s;
+  json["circle_renderer_min_chimney_fraction"] = min_chimney_fraction;
+  json["circle_renderer_min_chimney_gradient"] = min_chimney_gradient;
+  json["circle_per_servoing"] = nlohmann::ordered_json::array();
+  for (size_t k = 0; k < free_drift_mm.size(); ++k) {
+    json["circle_per_servoing"].push_back({{"servoing", k + 1},
+                                           {"drift_mm", free_drift_mm[k]},
+                                           {"drift_deg", free_drift_deg[k]},
+                                           {"final_pos_err_mm", free_step_mm[k]},
+                                           {"final_rot_err_deg", free_step_deg[k]},
+                                           {"images", free_images_per[k]},
+                                           {"status", free_status_per[k]}});
+  }
+  json["starts"] = nlohmann::ordered_json::array();
+  for (const auto& r : results) {
+    json["starts"].push_back({{"initial_pos_mm", r.initial_error.position_mm},
+                              {"initial_rot_deg", r.initial_error.rotation_deg},
+                              {"final_pos_err_mm", r.final_error.position_mm},
+                              {"final_rot_err_deg", r.final_error.rotation_deg},
+                              {"iterations", r.iterations},
+                              {"rematches", r.rematches},
+                              {"initial_matches", r.initial_matches},
+                              {"control_cpu_ms_mean", 1e3 * r.mean_control_cpu_time_s},
+                              {"status", sim::toString(r.status)}});
+  }
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_servo_image: " << e.what() << "\n";
     return 1;
   }
-  out << "{\n"
-      << "  \"image_loop_pos_err_mm\": " << num(pos_sum / n) << ",\n"
-      << "  \"image_loop_rot_err_deg\": " << num(rot_sum / n) << ",\n"
-      << "  \"image_loop_iterations\": " << num(iter_sum / n) << ",\n"
-      << "  \"image_loop_pos_err_mm_max\": " << num(pos_max) << ",\n"
-      << "  \"image_loop_rot_err_deg_max\": " << num(rot_max) << ",\n"
-      << "  \"image_loop_converged\": " << converged << ",\n"
-      << "  \"image_loop_pos_err_mm_without_anchoring\": " << num(pos_na / n) << ",\n"
-      << "  \"image_loop_rot_err_deg_without_anchoring\": " << num(rot_na / n) << ",\n"
-      << "  \"image_loop_converged_without_anchoring\": " << converged_na << ",\n"
-      << "  \"image_loop_runs\": " << starts.size() << ",\n"
-      << "  \"control_rate_hz\": " << num(rate_hz) << ",\n"
-      << "  \"control_cpu_ms_mean\": " << num(1e3 * cpu_mean) << ",\n"
-      << "  \"control_cpu_ms_max\": " << num(1e3 * cpu_max) << ",\n"
-      << "  \"control_rate_hz_wall\": " << num(wall_rate_hz) << ",\n"
-      << "  \"control_wall_ms_mean\": " << num(1e3 * control_mean) << ",\n"
-      << "  \"control_wall_ms_max\": " << num(1e3 * control_max) << ",\n"
-      << "  \"load_average\": " << num(load[0]) << ",\n"
-      << "  \"control_points_mean\": " << num(control_n > 0 ? static_cast<double>(points_sum) / control_n : NAN)
-      << ",\n"
-      << "  \"sift_match_ms_mean\": " << num(match_n > 0 ? 1e3 * match_sum / match_n : NAN) << ",\n"
-      << "  \"arm_circle_servoings\": " << run.drift_mm.size() << ",\n"
-      << "  \"arm_circle_status\": " << jsonString(run.status) << ",\n"
-      << "  \"arm_circle_images\": " << run.images << ",\n"
-      << "  \"arm_circle_drift_end_mm\": " << num(circle_drift_end_mm) << ",\n"
-      << "  \"arm_circle_drift_end_deg\": " << num(run.drift_deg.empty() ? NAN : run.drift_deg.back()) << ",\n"
-      << "  \"arm_circle_placement_m\": [" << num(arm.placement.axis_base_m.x()) << ", "
-      << num(arm.placement.axis_base_m.y()) << ", " << num(arm.placement.axis_base_m.z()) << "],\n"
-      << "  \"arm_circle_start_azimuth_deg\": " << num(arm.placement.start_azimuth_rad * 180.0 / M_PI) << ",\n"
-      << "  \"arm_circle_min_sigma\": " << num(arm.placement.found ? arm.placement.report.worst_sigma_min : NAN)
-      << ",\n"
-      << "  \"arm_circle_min_joint_margin_rad\": "
-      << num(arm.placement.found ? arm.placement.report.worst_joint_margin_rad : NAN) << ",\n"
-      << "  \"arm_circle_feasible_servoings\": " << arm.placed_check.feasible_steps << ",\n"
-      << "  \"arm_circle_min_sigma_run\": " << num(run.min_sigma_all) << ",\n"
-      << "  \"arm_circle_quarter_drift_mm\": " << num(quarter_drift_mm) << ",\n"
-      << "  \"arm_circle_quarter_drift_deg\": " << num(quarter_drift_deg) << ",\n"
-      << "  \"arm_circle_search_s\": " << num(arm.search_s) << ",\n"
-      << "  \"arm_circle_max_feasible_servoings_any_placement\": " << arm.max_feasible_any_placement << ",\n"
-      << "  \"arm_circle_default_feasible_servoings\": " << arm.default_check.feasible_steps << ",\n"
-      << "  \"arm_circle_default_min_sigma\": " << num(arm.default_check.worst_sigma_min) << ",\n"
-      << "  \"arm_circle_default_servoings\": " << arm.default_run.drift_mm.size() << ",\n"
-      << "  \"arm_circle_default_status\": " << jsonString(arm.default_run.status) << ",\n"
-      << "  \"arm_circle_default_min_sigma_run\": " << num(arm.default_run.min_sigma_all) << ",\n"
-      << "  \"arm_circle_default_drift_end_mm\": "
-      << num(arm.default_run.drift_mm.empty() ? NAN : arm.default_run.drift_mm.back()) << ",\n"
-      << "  \"circle_servoings\": " << free_drift_mm.size() << ",\n"
-      << "  \"circle_drift_end_mm\": " << num(free_drift_mm.empty() ? NAN : free_drift_mm.back()) << ",\n"
-      << "  \"circle_drift_end_deg\": " << num(free_drift_deg.empty() ? NAN : free_drift_deg.back()) << ",\n"
-      << "  \"circle_drift_max_mm\": " << num(free_drift_max_mm) << ",\n"
-      << "  \"circle_closure_mm\": " << num(free_closure_mm) << ",\n"
-      << "  \"circle_closure_deg\": " << num(free_closure_deg) << ",\n"
-      << "  \"circle_images\": " << free_images << ",\n"
-      << "  \"circle_status\": " << jsonString(free_status) << ",\n"
-      << "  \"circle_seconds\": " << num(free_circle_s) << ",\n"
-      << "  \"circle_renderer_min_chimney_fraction\": " << num(min_chimney_fraction) << ",\n"
-      << "  \"circle_renderer_min_chimney_gradient\": " << num(min_chimney_gradient) << ",\n"
-      << "  \"circle_per_servoing\": [\n";
-  for (size_t k = 0; k < free_drift_mm.size(); ++k) {
-    out << "    {\"servoing\": " << k + 1 << ", \"drift_mm\": " << num(free_drift_mm[k])
-        << ", \"drift_deg\": " << num(free_drift_deg[k]) << ", \"final_pos_err_mm\": " << num(free_step_mm[k])
-        << ", \"final_rot_err_deg\": " << num(free_step_deg[k]) << ", \"images\": " << free_images_per[k]
-        << ", \"status\": " << jsonString(free_status_per[k]) << "}" << (k + 1 < free_drift_mm.size() ? "," : "") << "\n";
-  }
-  out << "  ],\n"
-      << "  \"starts\": [\n";
-  for (size_t s = 0; s < results.size(); ++s) {
-    const auto& r = results[s];
-    out << "    {\"initial_pos_mm\": " << num(r.initial_error.position_mm)
-        << ", \"initial_rot_deg\": " << num(r.initial_error.rotation_deg)
-        << ", \"final_pos_err_mm\": " << num(r.final_error.position_mm)
-        << ", \"final_rot_err_deg\": " << num(r.final_error.rotation_deg) << ", \"iterations\": " << r.iterations
-        << ", \"rematches\": " << r.rematches << ", \"initial_matches\": " << r.initial_matches
-        << ", \"control_cpu_ms_mean\": " << num(1e3 * r.mean_control_cpu_time_s) << ", \"status\": "
-        << jsonString(sim::toString(r.status)) << "}" << (s + 1 < results.size() ? "," : "") << "\n";
-  }
-  out << "  ]\n}\n";
-  out.close();
   printf("\nwrote %s\n", path.c_str());
 
   // servo.json (bench_servo, which runs first) leaves the image-level figures to this benchmark: fill them in.
   const std::string servo_path = output_dir + "/servo.json";
-  std::ifstream servo_in(servo_path);
-  if (servo_in) {
-    std::stringstream text;
-    text << servo_in.rdbuf();
-    servo_in.close();
-    std::string json = text.str();
-    const std::pair<std::string, std::string> fields[] = {{"image_loop_pos_err_mm", num(pos_sum / n)},
-                                                          {"image_loop_rot_err_deg", num(rot_sum / n)},
-                                                          {"control_rate_hz", num(rate_hz)}};
-    for (const auto& [key, value] : fields) {
-      const std::string null_field = "\"" + key + "\": null";
-      const size_t at = json.find(null_field);
-      if (at != std::string::npos) json.replace(at, null_field.size(), "\"" + key + "\": " + value);
+  if (auto servo = exocet_common::readJsonObjectFile<nlohmann::ordered_json>(servo_path)) {
+    for (const char* key : {"image_loop_pos_err_mm", "image_loop_rot_err_deg", "control_rate_hz"})
+      if (servo->contains(key) && (*servo)[key].is_null()) (*servo)[key] = json[key];
+    try {
+      exocet_common::writeJsonFileAtomically(servo_path, *servo);
+    } catch (const std::exception& e) {
+      std::cerr << "bench_servo_image: " << e.what() << "\n";
+      return 1;
     }
-    std::ofstream(servo_path) << json;
     printf("filled the image-level figures of %s\n", servo_path.c_str());
   }
   return 0;

@@ -22,9 +22,11 @@
 #include <vector>
 
 #include <Eigen/Geometry>
-#include <opencv2/core/persistence.hpp>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
 #include "exocet_stereo/dense/dense_stereo.h"
@@ -36,8 +38,8 @@
 #include "exocet_stereo/io/mesh_export.h"
 #include "exocet_stereo/mesh/cloud_fusion.h"
 #include "exocet_stereo/mesh/cloud_surface.h"
-#include "exocet_stereo/mesh/pair_depth.h"
 #include "exocet_stereo/mesh/depth_map.h"
+#include "exocet_stereo/mesh/pair_depth.h"
 
 namespace {
 
@@ -50,25 +52,6 @@ const Eigen::Vector3d kTempleCentre(0.5 * (-0.073568 + 0.028855), 0.5 * (0.02172
                                     0.5 * (-0.012445 + 0.062736));
 
 double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-/// The benchmark's JSON, written by OpenCV's FileStorage; a figure that could not be measured is the string "n/a".
-class JsonReport {
- public:
-  explicit JsonReport(const std::string& path)
-      : storage_(path, cv::FileStorage::WRITE | cv::FileStorage::FORMAT_JSON) {}
-  bool ok() const { return storage_.isOpened(); }
-  void number(const std::string& key, double value) {
-    if (std::isfinite(value))
-      storage_ << key << value;
-    else
-      storage_ << key << "n/a";
-  }
-  void text(const std::string& key, const std::string& value) { storage_ << key << value; }
-  void close() { storage_.release(); }
-
- private:
-  cv::FileStorage storage_;
-};
 
 /// What COLMAP produced.
 struct ColmapOutcome {
@@ -292,7 +275,8 @@ double completeness(const exocet_servo::sim::VentSceneConfig& scene, const std::
   return samples > 0 ? static_cast<double>(hits) / samples : NAN;
 }
 
-void benchVent(JsonReport& json, const std::string& output_dir, const VentSettings& settings = VentSettings()) {
+void benchVent(nlohmann::ordered_json& json, const std::string& output_dir,
+               const VentSettings& settings = VentSettings()) {
   namespace sim = exocet_servo::sim;
   namespace mesh = exocet_stereo::mesh;
   const sim::VentSceneConfig scene;  // 0.3 m high, radius 0.1 m at the base, 0.05 m at the top
@@ -390,26 +374,26 @@ void benchVent(JsonReport& json, const std::string& output_dir, const VentSettin
   const double complete = completeness(scene, surface.vertices, 0.002, 0.003);
 
   if (!surface.empty()) exocet_stereo::io::writePly((fs::path(output_dir) / "vent_surface.ply").string(), surface);
-  json.number("vent_pairs", settings.pairs);
-  json.number("vent_points", static_cast<double>(cloud_rms.second));
-  json.number("vent_rms_pct", surface_rms.first * pct);
-  json.number("vent_cloud_rms_pct", cloud_rms.first * pct);
-  json.number("vent_seconds", total_s);
-  json.number("vent_completeness_pct", complete * 100.0);
-  json.number("vent_surface_rms_mm", surface_rms.first * 1e3);
-  json.number("vent_cloud_rms_mm", cloud_rms.first * 1e3);
-  json.number("vent_box_rms_pct", surface_box_rms.first * pct);
-  json.number("vent_cloud_box_rms_pct", cloud_box_rms.first * pct);
-  json.number("vent_box_points", static_cast<double>(cloud.size()));
-  json.number("vent_surface_vertices", static_cast<double>(surface.vertices.size()));
-  json.number("vent_surface_triangles", static_cast<double>(surface.triangles.size()));
-  json.number("vent_object_size_m", object_size_m);
-  json.number("vent_baseline_m", settings.baseline_m);
-  json.number("vent_stereo_seconds", stereo_s);
-  json.number("vent_fusion_seconds", fusion_s);
-  json.number("vent_surface_seconds", surface_s);
-  json.number("vent_render_seconds", render_s);
-  json.text("vent_method", settings.method);
+  json["vent_pairs"] = settings.pairs;
+  json["vent_points"] = cloud_rms.second;
+  json["vent_rms_pct"] = surface_rms.first * pct;
+  json["vent_cloud_rms_pct"] = cloud_rms.first * pct;
+  json["vent_seconds"] = total_s;
+  json["vent_completeness_pct"] = complete * 100.0;
+  json["vent_surface_rms_mm"] = surface_rms.first * 1e3;
+  json["vent_cloud_rms_mm"] = cloud_rms.first * 1e3;
+  json["vent_box_rms_pct"] = surface_box_rms.first * pct;
+  json["vent_cloud_box_rms_pct"] = cloud_box_rms.first * pct;
+  json["vent_box_points"] = cloud.size();
+  json["vent_surface_vertices"] = surface.vertices.size();
+  json["vent_surface_triangles"] = surface.triangles.size();
+  json["vent_object_size_m"] = object_size_m;
+  json["vent_baseline_m"] = settings.baseline_m;
+  json["vent_stereo_seconds"] = stereo_s;
+  json["vent_fusion_seconds"] = fusion_s;
+  json["vent_surface_seconds"] = surface_s;
+  json["vent_render_seconds"] = render_s;
+  json["vent_method"] = settings.method;
 
   std::cout << "\nVent (exocet_servo ray-cast scene, object size = height " << object_size_m
             << " m): " << settings.pairs << " stereo pairs on a ring of radius " << settings.ring_radius_m
@@ -437,63 +421,58 @@ void benchVent(JsonReport& json, const std::string& output_dir, const VentSettin
 }
 
 /// The figures of an earlier run's JSON except the vent's, so that "--only vent" rewrites the file without losing them.
-std::vector<std::pair<std::string, cv::FileNode>> earlierFigures(const std::string& json_path,
-                                                                 cv::FileStorage& storage) {
-  std::vector<std::pair<std::string, cv::FileNode>> figures;
-  if (!fs::exists(json_path) || !storage.open(json_path, cv::FileStorage::READ | cv::FileStorage::FORMAT_JSON))
-    return figures;
-  for (auto it = storage.root().begin(); it != storage.root().end(); ++it) {
-    const cv::FileNode node = *it;
-    if (node.name().rfind("vent_", 0) != 0 && (node.isReal() || node.isInt() || node.isString()))
-      figures.emplace_back(node.name(), node);
-  }
+nlohmann::ordered_json earlierFigures(const std::string& json_path) {
+  nlohmann::ordered_json figures = nlohmann::ordered_json::object();
+  const auto earlier = exocet_common::readJsonObjectFile<nlohmann::ordered_json>(json_path);
+  if (!earlier) return figures;
+  for (const auto& [key, value] : earlier->items())
+    if (key.rfind("vent_", 0) != 0 && (value.is_number() || value.is_string() || value.is_null())) figures[key] = value;
   return figures;
+}
+
+/// Writes the figures; false (with a message) if the file cannot be written.
+bool writeFigures(const std::string& json_path, const nlohmann::ordered_json& json) {
+  try {
+    exocet_common::writeJsonFileAtomically(json_path, json);
+    return true;
+  } catch (const std::exception& e) {
+    std::cerr << "bench_reconstruction: " << e.what() << "\n";
+    return false;
+  }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output_dir = "out/bench", shared = EXOCET_SHARED_DATA_DIR, only = "all";
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string arg = argv[i];
-    if (arg == "--output-dir")
-      output_dir = argv[i + 1];
-    else if (arg == "--shared-data")
-      shared = argv[i + 1];
-    else if (arg == "--only")
-      only = argv[i + 1];
-    else {
-      std::cerr << "bench_reconstruction: unknown argument '" << arg
-                << "' (--output-dir DIR --shared-data DIR --only all|vent)\n";
-      return 2;
-    }
-  }
-  if (only != "all" && only != "vent") {
-    std::cerr << "bench_reconstruction: --only must be 'all' or 'vent', not '" << only << "'\n";
-    return 2;
-  }
+  exocet_common::BenchmarkPaths paths;
+  paths.shared_data = EXOCET_SHARED_DATA_DIR;
+  std::string only = "all";
+  CLI::App app(
+      "bench_reconstruction: the stereo rig calibration against OpenCV's stored result, the temple ring\n"
+      "reconstructed from perturbed poses beside COLMAP, and the dense reconstruction of the simulated vent.\n"
+      "Writes OUTPUT_DIR/reconstruction.json.",
+      "bench_reconstruction");
+  exocet_common::addBenchmarkPathOptions(app, &paths);
+  app.add_option("--only", only,
+                 "all sections, or the vent's alone (the file keeps the other figures of an earlier run)")
+      ->check(CLI::IsMember({"all", "vent"}))
+      ->capture_default_str();
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& output_dir = paths.output_dir;
+  const std::string& shared = paths.shared_data;
   fs::create_directories(output_dir);
   const std::string json_path = (fs::path(output_dir) / "reconstruction.json").string();
-  // "--only vent" keeps the other sections' figures of an earlier run: read them before the file is rewritten.
-  cv::FileStorage earlier;
-  const auto kept =
-      only == "vent" ? earlierFigures(json_path, earlier) : decltype(earlierFigures(json_path, earlier))();
-  JsonReport json(json_path);
-  if (!json.ok()) {
-    std::cerr << "bench_reconstruction: cannot write " << json_path << "\n";
+  const std::string unwritable = exocet_common::checkWritableDestination(json_path);
+  if (!unwritable.empty()) {
+    std::cerr << "bench_reconstruction: cannot write " << json_path << ": " << unwritable << "\n";
     return 1;
   }
-  for (const auto& figure : kept) {
-    if (figure.second.isString())
-      json.text(figure.first, figure.second.string());
-    else
-      json.number(figure.first, figure.second.real());
-  }
-  earlier.release();
+  // "--only vent" keeps the other sections' figures of an earlier run.
+  nlohmann::ordered_json json = only == "vent" ? earlierFigures(json_path) : nlohmann::ordered_json::object();
   try {
     if (only == "vent") {
       benchVent(json, output_dir);
-      json.close();
+      if (!writeFigures(json_path, json)) return 1;
       std::cout << "written " << json_path << "\n";
       return 0;
     }
@@ -510,19 +489,19 @@ int main(int argc, char** argv) {
     const StereoRig rig = calibrateStereoRig(left, right);
     const double calib_s = secondsSince(start);
     const StereoRig stored = readStereoRig((board_dir / "intrinsics.yml").string());
-    json.number("calib_pairs_used", rig.pairs_used);
-    json.number("calib_rms_left_px", rig.rms_left_px);
-    json.number("calib_rms_right_px", rig.rms_right_px);
-    json.number("calib_rms_stereo_px", rig.rms_stereo_px);
-    json.number("calib_fx_left_px", rig.K_left.at<double>(0, 0));
-    json.number("calib_fx_right_px", rig.K_right.at<double>(0, 0));
-    json.number("calib_fx_left_minus_opencv_px", rig.K_left.at<double>(0, 0) - stored.K_left.at<double>(0, 0));
-    json.number("calib_fx_right_minus_opencv_px", rig.K_right.at<double>(0, 0) - stored.K_right.at<double>(0, 0));
-    json.number("calib_cx_left_minus_opencv_px", rig.K_left.at<double>(0, 2) - stored.K_left.at<double>(0, 2));
-    json.number("calib_cy_left_minus_opencv_px", rig.K_left.at<double>(1, 2) - stored.K_left.at<double>(1, 2));
-    json.number("calib_baseline_mm", rig.baseline_m * 1000.0);
-    json.number("calib_optical_axes_deg", rig.optical_axes_angle_deg);
-    json.number("calib_time_s", calib_s);
+    json["calib_pairs_used"] = rig.pairs_used;
+    json["calib_rms_left_px"] = rig.rms_left_px;
+    json["calib_rms_right_px"] = rig.rms_right_px;
+    json["calib_rms_stereo_px"] = rig.rms_stereo_px;
+    json["calib_fx_left_px"] = rig.K_left.at<double>(0, 0);
+    json["calib_fx_right_px"] = rig.K_right.at<double>(0, 0);
+    json["calib_fx_left_minus_opencv_px"] = rig.K_left.at<double>(0, 0) - stored.K_left.at<double>(0, 0);
+    json["calib_fx_right_minus_opencv_px"] = rig.K_right.at<double>(0, 0) - stored.K_right.at<double>(0, 0);
+    json["calib_cx_left_minus_opencv_px"] = rig.K_left.at<double>(0, 2) - stored.K_left.at<double>(0, 2);
+    json["calib_cy_left_minus_opencv_px"] = rig.K_left.at<double>(1, 2) - stored.K_left.at<double>(1, 2);
+    json["calib_baseline_mm"] = rig.baseline_m * 1000.0;
+    json["calib_optical_axes_deg"] = rig.optical_axes_angle_deg;
+    json["calib_time_s"] = calib_s;
 
     // --- Temple ring from perturbed poses. ---
     const fs::path temple_dir = fs::path(shared) / "temple_sparse_ring";
@@ -543,27 +522,27 @@ int main(int argc, char** argv) {
     const double ours_s = secondsSince(start);
     const CentreErrors before = centreErrorsAfterSimilarity(initial, truth, kTempleCentre);
     const CentreErrors after = centreErrorsAfterSimilarity(result.views, truth, kTempleCentre);
-    json.number("temple_views_registered", result.views_registered);
-    json.number("temple_points", static_cast<double>(result.points.size()));
-    json.number("temple_observations", result.observations);
-    json.number("temple_reproj_rms_px", result.final_rms_px);
-    json.number("temple_center_err_pct", after.max_pct);
-    json.number("temple_center_err_rms_pct", after.rms_pct);
-    json.number("temple_initial_center_err_pct", before.max_pct);
-    json.number("temple_initial_reproj_rms_px", result.initial_rms_px);
-    json.number("temple_time_s", ours_s);
+    json["temple_views_registered"] = result.views_registered;
+    json["temple_points"] = result.points.size();
+    json["temple_observations"] = result.observations;
+    json["temple_reproj_rms_px"] = result.final_rms_px;
+    json["temple_center_err_pct"] = after.max_pct;
+    json["temple_center_err_rms_pct"] = after.rms_pct;
+    json["temple_initial_center_err_pct"] = before.max_pct;
+    json["temple_initial_reproj_rms_px"] = result.initial_rms_px;
+    json["temple_time_s"] = ours_s;
 
     // --- COLMAP on the same images. ---
     const ColmapOutcome colmap = runColmap(temple_dir, truth);
-    json.text("colmap_status", colmap.status);
-    json.number("colmap_usable", colmap.ok ? 1 : 0);
-    json.number("colmap_time_s", colmap.ok ? colmap.seconds : NAN);
-    json.number("colmap_time_ratio", colmap.ok ? ours_s / colmap.seconds : NAN);
-    json.number("colmap_views_registered", colmap.ok ? colmap.views_registered : NAN);
-    json.number("colmap_points", colmap.ok ? colmap.points : NAN);
-    json.number("colmap_reproj_px", colmap.reproj_rms_px);
-    json.number("colmap_center_err_pct", colmap.centre_err_max_pct);
-    json.number("colmap_center_err_rms_pct", colmap.centre_err_rms_pct);
+    json["colmap_status"] = colmap.status;
+    json["colmap_usable"] = colmap.ok ? 1 : 0;
+    json["colmap_time_s"] = colmap.ok ? colmap.seconds : NAN;
+    json["colmap_time_ratio"] = colmap.ok ? ours_s / colmap.seconds : NAN;
+    json["colmap_views_registered"] = colmap.ok ? colmap.views_registered : NAN;
+    json["colmap_points"] = colmap.ok ? colmap.points : NAN;
+    json["colmap_reproj_px"] = colmap.reproj_rms_px;
+    json["colmap_center_err_pct"] = colmap.centre_err_max_pct;
+    json["colmap_center_err_rms_pct"] = colmap.centre_err_rms_pct;
 
     std::cout << "Stereo rig calibration (" << rig.pairs_used << " chessboard pairs): RMS left " << rig.rms_left_px
               << " px, right " << rig.rms_right_px << " px, stereo " << rig.rms_stereo_px << " px; fx "
@@ -595,9 +574,10 @@ int main(int argc, char** argv) {
     benchVent(json, output_dir);
   } catch (const std::exception& e) {
     std::cerr << "bench_reconstruction: " << e.what() << "\n";
+    writeFigures(json_path, json);  // what was measured before the failure
     return 1;
   }
-  json.close();
+  if (!writeFigures(json_path, json)) return 1;
   std::cout << "written " << json_path << "\n";
   return 0;
 }

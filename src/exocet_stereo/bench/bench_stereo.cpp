@@ -7,29 +7,26 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
 
 namespace {
 
-std::vector<std::string> splitCommas(const std::string& text) {
-  std::vector<std::string> items;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ','))
-    if (!item.empty()) items.push_back(item);
-  return items;
+/// `value` rounded to `decimals` decimals: the figures' precision (bad-pixel percentages to 0.001, times to 0.1 ms).
+double rounded(double value, int decimals) {
+  const double scale = std::pow(10.0, decimals);
+  return std::round(value * scale) / scale;
 }
 
 bool hasFractionalDisparity(const cv::Mat& ground_truth_px) {
@@ -41,71 +38,58 @@ bool hasFractionalDisparity(const cv::Mat& ground_truth_px) {
   return false;
 }
 
-int usage(const std::string& error) {
-  std::cerr << "bench_stereo: " << error << "\n"
-            << "usage: bench_stereo [--output-dir DIR] [--shared-data DIR] [--methods ssd,dp,...] "
-               "[--scenes tsukuba,...] [--repeat N] [--threads N] [--pm-seed N]\n"
-               "       [--pm-seeds 1,2,...]\n"
-            << "  --threads: OpenCV threads (default 1: single-core timings; 0: OpenCV's default)\n"
-            << "  --pm-seed: seed of PatchMatch's random draws (default 1)\n"
-            << "  --pm-seeds: seeds of the pm seed study (default 1,2,3,4,5; one seed: no study)\n";
-  return 2;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace exocet_stereo::dense;
-  std::string output_dir = "out/bench", shared_data = EXOCET_SHARED_DATA_DIR;
+  exocet_common::BenchmarkPaths paths;
+  paths.shared_data = EXOCET_SHARED_DATA_DIR;
   std::vector<std::string> methods = {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"};
   std::vector<std::string> scenes = {"tsukuba", "venus", "teddy", "cones"};
   int repeat = 3;   // timing: best of N runs for the fast methods (one run when a run exceeds a second)
   int threads = 1;  // single-core timings for every method, OpenCV's SGBM included
   int pm_seed = 1;  // PatchMatch's random draws: its rates move by a few tenths of a point with the seed on Teddy
   std::vector<int> pm_seeds = {1, 2, 3, 4, 5};  // seed study: one published run is one draw
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (i + 1 >= argc) return usage("option " + arg + " needs a value");
-    const std::string value = argv[++i];
-    if (arg == "--output-dir")
-      output_dir = value;
-    else if (arg == "--shared-data")
-      shared_data = value;
-    else if (arg == "--methods")
-      methods = splitCommas(value);
-    else if (arg == "--scenes")
-      scenes = splitCommas(value);
-    else if (arg == "--repeat")
-      repeat = std::max(1, std::atoi(value.c_str()));
-    else if (arg == "--threads")
-      threads = std::max(0, std::atoi(value.c_str()));
-    else if (arg == "--pm-seed")
-      pm_seed = std::atoi(value.c_str());
-    else if (arg == "--pm-seeds") {
-      pm_seeds.clear();
-      for (const auto& item : splitCommas(value)) {
-        char* end = nullptr;
-        const long seed = std::strtol(item.c_str(), &end, 10);
-        if (*end != '\0' || seed < 0 || seed > 1000000)
-          return usage("--pm-seeds takes integers in [0, 1000000] separated by commas, not '" + item + "'");
-        pm_seeds.push_back(static_cast<int>(seed));
-      }
-      if (pm_seeds.empty()) return usage("--pm-seeds needs at least one seed");
-    } else
-      return usage("unknown option " + arg);
-  }
+  CLI::App app(
+      "bench_stereo: every dense method on the four Middlebury v2 scenes: bad-pixel rates (> 1 px) and\n"
+      "single-thread wall time; PatchMatch's rates over several seeds. Writes OUTPUT_DIR/stereo.json.",
+      "bench_stereo");
+  exocet_common::addBenchmarkPathOptions(app, &paths);
+  app.add_option("--methods", methods, "comma-separated dense methods")
+      ->type_name("ssd,dp,...")
+      ->delimiter(',')
+      ->check(CLI::IsMember(denseStereoMethods()));
+  app.add_option("--scenes", scenes, "comma-separated scenes of SHARED_DATA/middlebury_stereo")
+      ->type_name("tsukuba,...")
+      ->delimiter(',');
+  app.add_option("--repeat", repeat, "timing: best of N runs (one run when a run exceeds a second)")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(1))
+      ->capture_default_str();
+  app.add_option("--threads", threads, "OpenCV threads (1: single-core timings; 0: OpenCV's default)")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(0))
+      ->capture_default_str();
+  app.add_option("--pm-seed", pm_seed, "seed of PatchMatch's random draws")->type_name("N")->capture_default_str();
+  app.add_option("--pm-seeds", pm_seeds, "seeds of the pm seed study, each in [0, 1000000] (one seed: no study)")
+      ->type_name("1,2,...")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 1000000))
+      ->default_str("1,2,3,4,5");
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string& output_dir = paths.output_dir;
+  const std::string& shared_data = paths.shared_data;
   if (threads > 0) cv::setNumThreads(threads);
 
-  std::ostringstream json;
+  nlohmann::ordered_json json = nlohmann::ordered_json::object();
   std::vector<double> pm_table_nonocc;  // the table's pm run per scene (seed pm_seed), reused by the seed study
-  json << "{";
   // cpu_ms (process CPU time) is printed beside the wall time: on a shared machine it shows the compute cost alone.
   std::printf("%-6s %-8s %8s %8s %8s %10s %10s\n", "method", "scene", "nonocc%", "all%", "disc%", "ms", "cpu_ms");
   try {
     std::vector<MiddleburyScene> loaded;
     for (const auto& scene : scenes) loaded.push_back(loadMiddleburyScene(shared_data + "/middlebury_stereo/" + scene));
     for (size_t m = 0; m < methods.size(); ++m) {
-      json << (m ? "," : "") << "\n  \"" << methods[m] << "\": {";
+      nlohmann::ordered_json& method_json = json[methods[m]] = nlohmann::ordered_json::object();
       for (size_t s = 0; s < loaded.size(); ++s) {
         const MiddleburyScene& scene = loaded[s];
         DenseStereoConfig config = defaultConfigFor(methods[m], scene.max_disparity_px);
@@ -133,12 +117,11 @@ int main(int argc, char** argv) {
         std::printf("%-6s %-8s %8.2f %8.2f %8.2f %10.1f %10.1f\n", methods[m].c_str(), scene.name.c_str(), rates.nonocc,
                     rates.all, rates.disc, best_ms, best_cpu_ms);
         std::fflush(stdout);
-        char entry[256];
-        std::snprintf(entry, sizeof(entry), "\"%s\": {\"nonocc\": %.3f, \"all\": %.3f, \"disc\": %.3f, \"ms\": %.1f}",
-                      scene.name.c_str(), rates.nonocc, rates.all, rates.disc, best_ms);
-        json << (s ? ", " : "") << entry;
+        method_json[scene.name] = {{"nonocc", rounded(rates.nonocc, 3)},
+                                   {"all", rounded(rates.all, 3)},
+                                   {"disc", rounded(rates.disc, 3)},
+                                   {"ms", rounded(best_ms, 1)}};
       }
-      json << "}";
     }
     const bool study = pm_seeds.size() > 1 && std::find(methods.begin(), methods.end(), "pm") != methods.end();
     if (study) {
@@ -146,7 +129,7 @@ int main(int argc, char** argv) {
       std::printf("pm seed study (non-occluded bad pixels %%), seeds");
       for (int seed : pm_seeds) std::printf(" %d", seed);
       std::printf("\n");
-      json << ",\n  \"pm_seeds\": {";
+      nlohmann::ordered_json& seeds_json = json["pm_seeds"] = nlohmann::ordered_json::object();
       for (size_t s = 0; s < loaded.size(); ++s) {
         const MiddleburyScene& scene = loaded[s];
         DenseStereoConfig config = defaultConfigFor("pm", scene.max_disparity_px);
@@ -168,32 +151,25 @@ int main(int argc, char** argv) {
         for (double v : nonocc) std::printf(" %6.3f", v);
         std::printf("   mean %6.3f  max %6.3f\n", mean, worst);
         std::fflush(stdout);
-        json << (s ? ", " : "") << "\"" << scene.name << "\": {\"seeds\": [";
-        for (size_t k = 0; k < pm_seeds.size(); ++k) json << (k ? ", " : "") << pm_seeds[k];
-        json << "], \"nonocc\": [";
-        char number[32];
-        for (size_t k = 0; k < nonocc.size(); ++k) {
-          std::snprintf(number, sizeof(number), "%.3f", nonocc[k]);
-          json << (k ? ", " : "") << number;
-        }
-        std::snprintf(number, sizeof(number), "%.3f", mean);
-        json << "], \"nonocc_mean\": " << number;
-        std::snprintf(number, sizeof(number), "%.3f", worst);
-        json << ", \"nonocc_max\": " << number << "}";
+        nlohmann::ordered_json rates = nlohmann::ordered_json::array();
+        for (double v : nonocc) rates.push_back(rounded(v, 3));
+        seeds_json[scene.name] = {{"seeds", pm_seeds},
+                                  {"nonocc", rates},
+                                  {"nonocc_mean", rounded(mean, 3)},
+                                  {"nonocc_max", rounded(worst, 3)}};
       }
-      json << "}";
     }
   } catch (const std::exception& e) {
     std::cerr << "bench_stereo: " << e.what() << "\n";
     return 1;
   }
-  json << "\n}\n";
   std::error_code ignored;
   std::filesystem::create_directories(output_dir, ignored);
   const std::string path = output_dir + "/stereo.json";
-  std::ofstream out(path);
-  if (!out || !(out << json.str())) {
-    std::cerr << "bench_stereo: cannot write " << path << " (does the directory exist?)\n";
+  try {
+    exocet_common::writeJsonFileAtomically(path, json);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_stereo: " << e.what() << "\n";
     return 1;
   }
   std::printf("wrote %s\n", path.c_str());

@@ -22,10 +22,11 @@
 #include <ros/callback_queue.h>
 #include <ros/names.h>
 #include <xmlrpcpp/XmlRpcValue.h>
+#include <nlohmann/json.hpp>
 
-#include "exocet_common/atomic_file.h"
 #include "exocet_common/ros/parameter_reader.h"
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/json_file.h"
 
 namespace exocet_mosaic {
 
@@ -79,23 +80,6 @@ std::string formatStamp(const ros::Time& t) {
   std::string s;
   appendStamp(&s, t);
   return s;
-}
-
-std::string jsonString(const std::string& text) {
-  std::string out = "\"";
-  for (const char c : text) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char escaped[8];
-      std::snprintf(escaped, sizeof(escaped), "\\u%04x", static_cast<unsigned>(c));
-      out += escaped;
-    } else {
-      out += c;
-    }
-  }
-  return out + "\"";
 }
 
 struct RollPitchYaw_deg {
@@ -550,17 +534,18 @@ void TrajectoryLogger::closeFileSet(FileSet* set) {
 
 void TrajectoryLogger::writeDatumFile(FileSet* set) {
   const exocet_msgs::GeoDatum& d = datum_msg_;
-  const std::string json = "{\n  \"topic\": " + jsonString(datum_stream_.topic) +
-                           ",\n  \"frame_id\": " + jsonString(d.frame_id) +
-                           ",\n  \"utm_zone\": " + std::to_string(d.utm_zone) +
-                           ",\n  \"northern_hemisphere\": " + (d.northern_hemisphere ? "true" : "false") +
-                           ",\n  \"epsg\": " + std::to_string(d.epsg) +
-                           ",\n  \"origin_latitude_deg\": " + formatNumber(d.origin_latitude_deg) +
-                           ",\n  \"origin_longitude_deg\": " + formatNumber(d.origin_longitude_deg) +
-                           ",\n  \"origin_easting_m\": " + formatNumber(d.origin_easting_m) +
-                           ",\n  \"origin_northing_m\": " + formatNumber(d.origin_northing_m) + "\n}\n";
+  nlohmann::ordered_json json;
+  json["topic"] = datum_stream_.topic;
+  json["frame_id"] = d.frame_id;
+  json["utm_zone"] = static_cast<int>(d.utm_zone);
+  json["northern_hemisphere"] = static_cast<bool>(d.northern_hemisphere);
+  json["epsg"] = static_cast<int>(d.epsg);
+  json["origin_latitude_deg"] = d.origin_latitude_deg;
+  json["origin_longitude_deg"] = d.origin_longitude_deg;
+  json["origin_easting_m"] = d.origin_easting_m;
+  json["origin_northing_m"] = d.origin_northing_m;
   try {
-    exocet_common::writeFileAtomically(set->datum_path, json);
+    exocet_common::writeJsonFileAtomically(set->datum_path, json);
     set->datum_written = true;
   } catch (const std::exception& e) {
     noteWriteError(set->datum_path, e.what());

@@ -6,68 +6,66 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <string>
 #include <vector>
 
-#include "exocet_mosaic/tiles/tile_json.h"
+#include <nlohmann/json.hpp>
+
+#include "exocet_common/json_file.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 
 namespace et = exocet_mosaic::tiles;
 
-const char kUsage[] =
-    "usage: adjust_tiles --tiles DIR --output DIR [--report FILE.json] [--patch-px N] [--patch-sigma-px S]\n"
-    "                    [--rotation-scale-sigma R]\n"
-    "Registers every pair of overlapping tiles (<prefix>_NNNN.tif in DIR, as the tile writer names them) and moves\n"
-    "each by one similarity (shift, rotation, scale) so that they agree, weighed against each tile's navigation\n"
-    "1-sigma (EXOCET_POSITION_SIGMA_M). Writes the tiles resampled north-up (same names, GSD, compression and\n"
-    "metadata, plus EXOCET_ADJUSTMENT_*; .tfw) into the output folder, which must exist and differ from DIR;\n"
-    "nothing is overwritten.\n";
-
-int usage(const std::string& why) {
-  std::cerr << "adjust_tiles: " << why << "\n" << kUsage;
-  return 2;
+int badInput(const std::string& why) {
+  std::cerr << "adjust_tiles: " << why << "\n";
+  return exocet_common::kExitBadInput;
 }
+
+std::string fileName(const std::string& path) { return std::filesystem::path(path).filename().string(); }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string tiles_dir, output_dir, report;
   et::TileAdjustmentConfig config;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string { return i + 1 < argc ? argv[++i] : std::string(); };
-    if (arg == "--tiles")
-      tiles_dir = value();
-    else if (arg == "--output")
-      output_dir = value();
-    else if (arg == "--report")
-      report = value();
-    else if (arg == "--patch-px")
-      config.patch_px = std::atoi(value().c_str());
-    else if (arg == "--patch-sigma-px")
-      config.patch_sigma_px = std::atof(value().c_str());
-    else if (arg == "--rotation-scale-sigma")
-      config.rotation_scale_sigma = std::atof(value().c_str());
-    else if (arg == "-h" || arg == "--help") {
-      std::cout << kUsage;
-      return 0;
-    } else
-      return usage("unknown argument '" + arg + "'");
-  }
-  if (tiles_dir.empty() || output_dir.empty()) return usage("--tiles and --output are required");
+  CLI::App app(
+      "Registers every pair of overlapping tiles (<prefix>_NNNN.tif in DIR, as the tile writer names them) and moves\n"
+      "each by one similarity (shift, rotation, scale) so that they agree, weighed against each tile's navigation\n"
+      "1-sigma (EXOCET_POSITION_SIGMA_M). Writes the tiles resampled north-up (same names, GSD, compression and\n"
+      "metadata, plus EXOCET_ADJUSTMENT_*; .tfw) into the output folder, which must exist and differ from DIR;\n"
+      "nothing is overwritten.",
+      "adjust_tiles");
+  app.add_option("--tiles", tiles_dir, "folder of the live tiles")->required()->check(CLI::ExistingDirectory);
+  app.add_option("--output", output_dir, "existing folder for the adjusted tiles, not the tiles' own")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--report", report, "also write the pairs measured and the shifts applied as JSON")
+      ->type_name("FILE.json");
+  app.add_option("--patch-px", config.patch_px, "side of the correlated patches (pixels), a power of two in [32, 1024]")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--patch-sigma-px", config.patch_sigma_px,
+                 "1-sigma of one patch's measured offset (pixels), in (0, 100]")
+      ->type_name("S")
+      ->capture_default_str();
+  app.add_option("--rotation-scale-sigma", config.rotation_scale_sigma,
+                 "prior 1-sigma of a tile's rotation (rad) and scale change (fraction), in (0, 1]")
+      ->type_name("R")
+      ->capture_default_str();
+  app.footer("Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.");
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
   const std::string invalid = config.validate();
-  if (!invalid.empty()) return usage(invalid);
+  if (!invalid.empty()) return badInput(invalid);
 
   std::string list_error;
   const std::vector<std::string> paths = et::listTiles(tiles_dir, &list_error);
-  if (!list_error.empty()) return usage(list_error);
-  if (paths.empty()) return usage("no tile (<prefix>_NNNN.tif) in '" + tiles_dir + "'");
+  if (!list_error.empty()) return badInput(list_error);
+  if (paths.empty()) return badInput("no tile (<prefix>_NNNN.tif) in '" + tiles_dir + "'");
 
   et::TileAdjustmentResult result = et::measureAndSolve(paths, config);
   if (!result.ok) {
@@ -90,25 +88,29 @@ int main(int argc, char** argv) {
                 1e3 * t.rotation_rad, 1e3 * t.scale_change, t.position_sigma_m);
   et::writeAdjustedTiles(output_dir, &result);
   if (!report.empty()) {
-    std::ofstream out(report);
-    out << "{\n  \"tiles\": " << result.tiles.size() << ",\n  \"pairs\": " << result.pairs.size()
-        << ",\n  \"pair_offset_max_px\": " << et::jsonNumber(worst_before)
-        << ",\n  \"pair_residual_max_px\": " << et::jsonNumber(worst_after) << ",\n  \"shifts_m\": {";
-    for (size_t i = 0; i < result.tiles.size(); ++i)
-      out << (i ? ", " : "") << "\"" << std::filesystem::path(result.tiles[i].path).filename().string() << "\": ["
-          << et::jsonNumber(result.tiles[i].shift_en_m.x()) << ", " << et::jsonNumber(result.tiles[i].shift_en_m.y())
-          << "]";
-    out << "},\n  \"pair_list\": [";
-    for (size_t i = 0; i < result.pairs.size(); ++i) {
-      const auto& p = result.pairs[i];
+    nlohmann::ordered_json json;
+    json["tiles"] = result.tiles.size();
+    json["pairs"] = result.pairs.size();
+    json["pair_offset_max_px"] = worst_before;
+    json["pair_residual_max_px"] = worst_after;
+    json["shifts_m"] = nlohmann::ordered_json::object();
+    for (const auto& t : result.tiles) json["shifts_m"][fileName(t.path)] = {t.shift_en_m.x(), t.shift_en_m.y()};
+    json["pair_list"] = nlohmann::ordered_json::array();
+    for (const auto& p : result.pairs) {
       const double g = result.tiles[p.a].gsd_m;
-      out << (i ? ",\n    " : "\n    ") << "{\"a\": \"" << std::filesystem::path(result.tiles[p.a].path).filename().string()
-          << "\", \"b\": \"" << std::filesystem::path(result.tiles[p.b].path).filename().string()
-          << "\", \"patches\": " << p.patches << ", \"patch_px\": " << p.patch_px
-          << ", \"offset_px\": " << et::jsonNumber(p.offset_en_m.norm() / g)
-          << ", \"residual_px\": " << et::jsonNumber(p.residual_en_m.norm() / g) << "}";
+      json["pair_list"].push_back({{"a", fileName(result.tiles[p.a].path)},
+                                   {"b", fileName(result.tiles[p.b].path)},
+                                   {"patches", p.patches},
+                                   {"patch_px", p.patch_px},
+                                   {"offset_px", p.offset_en_m.norm() / g},
+                                   {"residual_px", p.residual_en_m.norm() / g}});
     }
-    out << "]\n}\n";
+    try {
+      exocet_common::writeJsonFileAtomically(report, json);
+    } catch (const std::exception& e) {
+      std::cerr << "adjust_tiles: " << e.what() << "\n";
+      return 1;
+    }
   }
   if (!result.ok) {
     std::cerr << "adjust_tiles: " << result.error << "\n";

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
@@ -15,6 +16,7 @@
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/geo_reference.h"
 #include "exocet_mosaic/sim/image_seabed.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 
@@ -26,40 +28,21 @@ void onSignal(int) { g_interrupted = true; }
 
 struct Interrupted {};
 
-const char* kUsage =
-    R"(dive_synth: synthesize a dive (downward camera over a seabed, navigation sensors, ground truth) into a bag.
+const char kDescription[] =
+    "dive_synth: synthesize a dive (downward camera over a seabed, navigation sensors, ground truth) into a bag.\n"
+    "\n"
+    "Outputs (each written under a temporary name and renamed when complete):\n"
+    "  OUT.bag                  camera images + camera_info, /nav/* sensors, /nav/datum, /tf_static, /ground_truth/*\n"
+    "  OUT.ground_truth.csv     one row per camera frame: vehicle and camera pose (UTM), altitude, GSD, lat/lon\n"
+    "  OUT.landmarks.csv        surveyed seabed targets (checker squares) with their UTM and WGS 84 positions\n"
+    "  OUT.config.yaml          the complete description used (every key), to reproduce or edit the dive\n"
+    "\n"
+    "Each option below but --config, --output, --print-config and --quiet is a shortcut for --set, applied in the\n"
+    "order given; the YAML keys, their units and ranges are in config/dives/README.md.";
 
-Usage: dive_synth [--config DIVE.yaml] --output OUT.bag [options]
-
-Outputs (each written under a temporary name and renamed when complete):
-  OUT.bag                  camera images + camera_info, /nav/* sensors, /nav/datum, /tf_static, /ground_truth/*
-  OUT.ground_truth.csv     one row per camera frame: vehicle and camera pose (UTM), altitude, GSD, lat/lon
-  OUT.landmarks.csv        surveyed seabed targets (checker squares) with their UTM and WGS 84 positions
-  OUT.config.yaml          the complete description used (every key), to reproduce or edit the dive
-
-Options (each is a shortcut for --set; the YAML keys and their units are in config/dives/README.md):
-  --config FILE            dive description (YAML); without it, the defaults (a PAL lawnmower survey)
-  --output FILE.bag        the bag to write (required unless --print-config)
-  --seed N                 seed of every random draw: same arguments and seed give a byte-identical bag
-  --duration S             stop after S seconds (0: the whole trajectory)
-  --preset pal|hd          720x576 or 1920x1080 camera
-  --trajectory KIND        lawnmower | out_and_back | waypoints
-  --waypoints FILE.csv     waypoints (header x_m,y_m[,altitude_m][,speed_mps]); implies --trajectory waypoints
-  --relief                 seabed with relief (rocks, mounds, slopes) instead of a plane
-  --seabed-image FILE      render a georeferenced picture of the seabed (top row = north)...
-  --seabed-pixel-size M    ...whose pixels measure M metres on the ground
-  --ideal                  no light cone, vignetting, attenuation, backscatter, noise, snow or blur
-  --encoding ENC           bgr8 | rgb8 | mono8 | mono16 | bayer_rggb8
-  --image-storage KIND     raw | jpeg | png (jpeg/png go to /camera/image_raw/compressed)
-  --threads N              rendering threads (the output does not depend on it)
-  --set KEY=VALUE          set any key of the description, e.g. --set trajectory.altitude_m=3.5
-  --print-config           print the complete description and exit
-  --quiet                  no progress lines
-  --help                   this text
-
-Exit status: 0 done, 2 bad arguments or description (the message names the key and its allowed range),
-1 I/O failure, 130 interrupted (nothing is left under the output names).
-)";
+const char kFooter[] =
+    "Exit status: 0 done, 2 bad arguments or description (the message names the key and its allowed range),\n"
+    "1 I/O failure, 130 interrupted (nothing is left under the output names).";
 
 std::string csvNumber(double v, int precision) {
   std::ostringstream ss;
@@ -67,63 +50,8 @@ std::string csvNumber(double v, int precision) {
   return ss.str();
 }
 
-int run(int argc, char** argv) {
-  std::string config_path, output;
-  std::vector<std::string> overrides;
-  bool print_config = false, quiet = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&](const char* name) -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(std::string(name) + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--help" || a == "-h") {
-      std::cout << kUsage;
-      return 0;
-    } else if (a == "--config") {
-      config_path = value("--config");
-    } else if (a == "--output") {
-      output = value("--output");
-    } else if (a == "--seed") {
-      overrides.push_back("seed=" + value("--seed"));
-    } else if (a == "--duration") {
-      overrides.push_back("duration_s=" + value("--duration"));
-    } else if (a == "--preset") {
-      overrides.push_back("camera.preset=" + value("--preset"));
-    } else if (a == "--trajectory") {
-      overrides.push_back("trajectory.kind=" + value("--trajectory"));
-    } else if (a == "--waypoints") {
-      overrides.push_back("trajectory.kind=waypoints");
-      overrides.push_back("trajectory.waypoints_csv=" + value("--waypoints"));
-    } else if (a == "--relief") {
-      overrides.push_back("seabed.relief=true");
-    } else if (a == "--seabed-image") {
-      overrides.push_back("seabed.kind=image");
-      overrides.push_back("seabed.image=" + value("--seabed-image"));
-    } else if (a == "--seabed-pixel-size") {
-      overrides.push_back("seabed.image_pixel_size_m=" + value("--seabed-pixel-size"));
-    } else if (a == "--ideal") {
-      for (const char* o :
-           {"imaging.light_cone_strength=0", "imaging.vignetting=0", "imaging.attenuation_per_m=[0,0,0]",
-            "imaging.backscatter=0", "imaging.noise_sigma_dn=0", "imaging.shot_noise_dn=0",
-            "imaging.marine_snow_per_m3=0", "imaging.motion_blur_exposure_s=0", "imaging.segments=[]"})
-        overrides.push_back(o);
-    } else if (a == "--encoding") {
-      overrides.push_back("camera.encoding=" + value("--encoding"));
-    } else if (a == "--image-storage") {
-      overrides.push_back("output.image_storage=" + value("--image-storage"));
-    } else if (a == "--threads") {
-      overrides.push_back("threads=" + value("--threads"));
-    } else if (a == "--set") {
-      overrides.push_back(value("--set"));
-    } else if (a == "--print-config") {
-      print_config = true;
-    } else if (a == "--quiet") {
-      quiet = true;
-    } else {
-      throw std::invalid_argument("unknown argument '" + a + "' (see --help)");
-    }
-  }
+int run(const std::string& config_path, const std::string& output, const std::vector<std::string>& overrides,
+        bool print_config, bool quiet) {
   const DiveDescription dive =
       config_path.empty() ? parseDiveDescription("", overrides, ".") : loadDiveDescription(config_path, overrides);
   if (print_config) {
@@ -230,16 +158,81 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string config_path, output;
+  std::vector<std::string> overrides;  // in command-line order: a later setting of a key wins
+  bool print_config = false, quiet = false;
+  CLI::App app(kDescription, "dive_synth");
+  app.add_option("--config", config_path, "dive description (YAML); without it, the defaults (a PAL lawnmower survey)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--output", output, "the bag to write (required unless --print-config)")->type_name("FILE.bag");
+  // A shortcut appends its settings as it is parsed (trigger_on_parse), so that they keep their place among --set's.
+  using Settings = std::function<std::vector<std::string>(const std::string&)>;
+  const auto shortcut = [&](const std::string& name, const std::string& value_name, const Settings& settings,
+                            const std::string& what) {
+    app.add_option_function<std::string>(
+           name,
+           [&overrides, settings](const std::string& value) {
+             for (const std::string& setting : settings(value)) overrides.push_back(setting);
+           },
+           what)
+        ->type_name(value_name)
+        ->trigger_on_parse()
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  };
+  const auto key = [](const std::string& name) -> Settings {
+    return [name](const std::string& value) { return std::vector<std::string>{name + "=" + value}; };
+  };
+  const auto flag = [&](const std::string& name, const std::vector<std::string>& settings, const std::string& what) {
+    app.add_flag_callback(
+           name, [&overrides, settings] { overrides.insert(overrides.end(), settings.begin(), settings.end()); }, what)
+        ->trigger_on_parse();
+  };
+  shortcut("--seed", "N", key("seed"), "seed of every random draw: same arguments and seed give a byte-identical bag");
+  shortcut("--duration", "S", key("duration_s"), "stop after S seconds (0: the whole trajectory)");
+  shortcut("--preset", "pal|hd", key("camera.preset"), "720x576 or 1920x1080 camera");
+  shortcut("--trajectory", "KIND", key("trajectory.kind"), "lawnmower | out_and_back | waypoints");
+  shortcut(
+      "--waypoints", "FILE.csv",
+      [](const std::string& v) {
+        return std::vector<std::string>{"trajectory.kind=waypoints", "trajectory.waypoints_csv=" + v};
+      },
+      "waypoints (header x_m,y_m[,altitude_m][,speed_mps]); implies --trajectory waypoints");
+  flag("--relief", {"seabed.relief=true"}, "seabed with relief (rocks, mounds, slopes) instead of a plane");
+  shortcut(
+      "--seabed-image", "FILE",
+      [](const std::string& v) {
+        return std::vector<std::string>{"seabed.kind=image", "seabed.image=" + v};
+      },
+      "render a georeferenced picture of the seabed (top row = north)...");
+  shortcut("--seabed-pixel-size", "M", key("seabed.image_pixel_size_m"),
+           "...whose pixels measure M metres on the ground");
+  flag("--ideal",
+       {"imaging.light_cone_strength=0", "imaging.vignetting=0", "imaging.attenuation_per_m=[0,0,0]",
+        "imaging.backscatter=0", "imaging.noise_sigma_dn=0", "imaging.shot_noise_dn=0", "imaging.marine_snow_per_m3=0",
+        "imaging.motion_blur_exposure_s=0", "imaging.segments=[]"},
+       "no light cone, vignetting, attenuation, backscatter, noise, snow or blur");
+  shortcut("--encoding", "ENC", key("camera.encoding"), "bgr8 | rgb8 | mono8 | mono16 | bayer_rggb8");
+  shortcut("--image-storage", "KIND", key("output.image_storage"),
+           "raw | jpeg | png (jpeg/png go to /camera/image_raw/compressed)");
+  shortcut("--threads", "N", key("threads"), "rendering threads (the output does not depend on it)");
+  shortcut(
+      "--set", "KEY=VALUE", [](const std::string& v) { return std::vector<std::string>{v}; },
+      "set any key of the description, e.g. --set trajectory.altitude_m=3.5");
+  app.add_flag("--print-config", print_config, "print the complete description and exit");
+  app.add_flag("--quiet", quiet, "no progress lines");
+  app.footer(kFooter);
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   try {
-    return run(argc, argv);
+    return run(config_path, output, overrides, print_config, quiet);
   } catch (const Interrupted&) {
     std::cerr << "dive_synth: interrupted; no output was left under the final names\n";
     return 130;
   } catch (const std::invalid_argument& e) {
     std::cerr << "dive_synth: error: " << e.what() << "\n";
-    return 2;
+    return exocet_common::kExitBadInput;
   } catch (const std::exception& e) {
     std::cerr << "dive_synth: error: " << e.what() << "\n";
     return 1;

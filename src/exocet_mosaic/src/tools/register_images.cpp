@@ -2,62 +2,36 @@
 //   rosrun exocet_mosaic register_images [--method klt|rmr|auto] [--model similarity|affine|homography|translation]
 //                                        A.png B.png
 // Exit status: 0 registered, 3 the registration failed (the JSON says why), 2 bad arguments or unreadable images.
-#include <cmath>
-#include <iomanip>
 #include <iostream>
-#include <limits>
-#include <sstream>
 #include <string>
+#include <vector>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "exocet_mosaic/registration/gray_converter.h"
 #include "exocet_mosaic/registration/registration_config.h"
+#include "exocet_common/json_file.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 
 using namespace exocet_mosaic::registration;
 
-const char kUsage[] =
-    "usage: register_images [--method klt|rmr|auto] [--model similarity|affine|homography|translation] A B\n"
-    "Prints one JSON object: matrix (2x3, or 3x3 for a homography: A's pixels to B's), homography (always 3x3),\n"
-    "parameters and covariance (centred on centre_px), quality, failed, failure, failure_detail.\n"
-    "Defaults: --method auto --model similarity.\n";
+const char kDescription[] =
+    "register_images: registers image A to image B (same size; 8-bit grey/BGR/BGRA or 16-bit grey) and prints one\n"
+    "JSON object: matrix (2x3, or 3x3 for a homography: A's pixels to B's), homography (always 3x3), parameters and\n"
+    "covariance (centred on centre_px), quality, failed, failure, failure_detail.";
 
-std::string number(double v) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(std::numeric_limits<double>::max_digits10) << v;
-  return s.str();
-}
-
-std::string jsonString(const std::string& text) {
-  std::string out = "\"";
-  for (char c : text) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (c == '\n') {
-      out += "\\n";
-      continue;
-    }
-    out += c;
-  }
-  return out + "\"";
-}
-
-std::string rows(const Eigen::MatrixXd& m, int row_count) {
-  std::string out = "[";
+/// The rows of `m` up to `row_count`, as a JSON array of arrays; NaN as null.
+nlohmann::ordered_json rows(const Eigen::MatrixXd& m, int row_count) {
+  nlohmann::ordered_json out = nlohmann::ordered_json::array();
   for (int r = 0; r < row_count; ++r) {
-    out += r ? ", [" : "[";
-    for (int c = 0; c < m.cols(); ++c) out += (c ? ", " : "") + number(m(r, c));
-    out += "]";
+    nlohmann::ordered_json row = nlohmann::ordered_json::array();
+    for (int c = 0; c < m.cols(); ++c) row.push_back(m(r, c));
+    out.push_back(row);
   }
-  return out + "]";
-}
-
-std::string vectorJson(const Eigen::VectorXd& v) {
-  std::string out = "[";
-  for (int i = 0; i < v.size(); ++i) out += (i ? ", " : "") + number(v[i]);
-  return out + "]";
+  return out;
 }
 
 cv::Mat readGray(const std::string& path) {
@@ -81,27 +55,30 @@ cv::Mat readGray(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  RegistrationConfig config;
+  std::string method = toString(RegistrationMethod::kAuto), model = toString(MotionModel::kSimilarity);
   std::vector<std::string> files;
+  CLI::App app(kDescription, "register_images");
+  app.add_option("--method", method, "registration method: KLT, RMR, or KLT falling back on RMR")
+      ->check(CLI::IsMember({toString(RegistrationMethod::kKlt), toString(RegistrationMethod::kRmr),
+                             toString(RegistrationMethod::kAuto)}))
+      ->capture_default_str();
+  app.add_option("--model", model, "motion model fitted")
+      ->check(CLI::IsMember({toString(MotionModel::kSimilarity), toString(MotionModel::kAffine),
+                             toString(MotionModel::kHomography), toString(MotionModel::kTranslation)}))
+      ->capture_default_str();
+  app.add_option("images", files, "image A, then image B")
+      ->type_name("A B")
+      ->expected(2)
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.footer(
+      "Exit status: 0 registered, 3 the registration failed (the JSON says why), 2 bad arguments or unreadable "
+      "images.");
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  RegistrationConfig config;
+  config.method = registrationMethodFromString(method);
+  config.model = motionModelFromString(model);
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "-h" || a == "--help") {
-        std::cout << kUsage;
-        return 0;
-      }
-      if ((a == "--method" || a == "--model") && i + 1 < argc) {
-        if (a == "--method")
-          config.method = registrationMethodFromString(argv[++i]);
-        else
-          config.model = motionModelFromString(argv[++i]);
-      } else if (!a.empty() && a[0] == '-') {
-        throw std::invalid_argument("unknown option '" + a + "'");
-      } else {
-        files.push_back(a);
-      }
-    }
-    if (files.size() != 2) throw std::invalid_argument("two images are needed, got " + std::to_string(files.size()));
     const cv::Mat a = readGray(files[0]);
     const cv::Mat b = readGray(files[1]);
     if (a.size() != b.size())
@@ -111,22 +88,26 @@ int main(int argc, char** argv) {
     std::unique_ptr<FrameRegistrar> registrar = makeRegistrar(config);
     const MotionEstimate e = registrar->registerPair(a, b);
     const Eigen::Matrix3d h = e.failed ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(e.pixel_matrix / e.pixel_matrix(2, 2));
-    std::cout << "{\"matrix\": " << rows(h, e.model == MotionModel::kHomography ? 3 : 2)
-              << ", \"homography\": " << rows(h, 3) << ", \"model\": " << jsonString(toString(e.model))
-              << ", \"method\": " << jsonString(toString(e.method)) << ", \"centre_px\": ["
-              << number(e.centre_px.x()) << ", " << number(e.centre_px.y()) << "], \"parameters\": "
-              << (e.failed ? std::string("null") : vectorJson(e.parameters))
-              << ", \"covariance\": "
-              << (e.failed ? std::string("null") : rows(e.covariance, int(e.covariance.rows())))
-              << ", \"quality\": {\"observations\": " << e.observations << ", \"inliers\": " << e.inliers
-              << ", \"inlier_fraction\": " << number(e.inlier_fraction)
-              << ", \"residual_scale\": " << number(e.residual_scale) << ", \"iterations\": " << e.iterations
-              << ", \"elapsed_ms\": " << number(e.elapsed_ms) << "}, \"failed\": " << (e.failed ? "true" : "false")
-              << ", \"failure\": " << jsonString(toString(e.failure))
-              << ", \"failure_detail\": " << jsonString(e.failure_detail) << "}\n";
+    nlohmann::ordered_json json;
+    json["matrix"] = rows(h, e.model == MotionModel::kHomography ? 3 : 2);
+    json["homography"] = rows(h, 3);
+    json["model"] = toString(e.model);
+    json["method"] = toString(e.method);
+    json["centre_px"] = {e.centre_px.x(), e.centre_px.y()};
+    json["parameters"] = nullptr;
+    if (!e.failed)
+      json["parameters"] = std::vector<double>(e.parameters.data(), e.parameters.data() + e.parameters.size());
+    json["covariance"] = e.failed ? nlohmann::ordered_json(nullptr) : rows(e.covariance, int(e.covariance.rows()));
+    json["quality"] = {{"observations", e.observations},       {"inliers", e.inliers},
+                       {"inlier_fraction", e.inlier_fraction}, {"residual_scale", e.residual_scale},
+                       {"iterations", e.iterations},           {"elapsed_ms", e.elapsed_ms}};
+    json["failed"] = e.failed;
+    json["failure"] = toString(e.failure);
+    json["failure_detail"] = e.failure_detail;
+    std::cout << exocet_common::jsonText(json, -1) << "\n";
     return e.failed ? 3 : 0;
   } catch (const std::invalid_argument& e) {
-    std::cerr << "register_images: " << e.what() << "\n" << kUsage;
-    return 2;
+    std::cerr << "register_images: " << e.what() << "\n";
+    return exocet_common::kExitBadInput;
   }
 }

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <string>
@@ -26,30 +27,16 @@
 #include "exocet_mosaic/registration/gray_converter.h"
 #include "exocet_mosaic/selfcal/self_calibration.h"
 #include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/command_line.h"
 
 namespace {
 
 using namespace exocet_mosaic;
 
-const char kUsage[] =
-    "usage: self_calibrate (--bag FILE --image-topic TOPIC | --images DIR) --output camera.yaml [options]\n"
-    "Estimates alpha_u, alpha_v, u0, v0 (no skew, no distortion) from a sequence of seabed images without a\n"
-    "calibration pattern: the camera must move over relief, turning about its optical axis and rolling/pitching.\n"
-    "  --bag FILE              a bag with sensor_msgs/Image (mono8, mono16, bgr8, rgb8, bayer...) or\n"
-    "                          sensor_msgs/CompressedImage (JPEG, PNG) messages\n"
-    "  --image-topic TOPIC     e.g. /camera/image_raw/compressed\n"
-    "  --images DIR            image files (png, jpg, tif, bmp, pgm, ppm), taken in name order\n"
-    "  --output FILE           camera_calibration_parsers YAML, with the 1-sigma of each parameter under\n"
-    "                          'self_calibration'\n"
-    "  --step N                key frame every N frames (default 10): key frames must overlap but differ by\n"
-    "                          a visible motion\n"
-    "  --max-frames N          frames read (default 300)\n"
-    "  --start-frame N         frames skipped first (default 0)\n"
-    "  --initial-hfov-deg D    nominal horizontal field of view of the initial guess (default 60)\n"
-    "  --planar                on a flat seabed, calibrate from the plane's homographies (needs roll and pitch)\n"
-    "  --seed S                RANSAC's random seed (default 1)\n"
-    "  --camera-name NAME      camera_name in the YAML (default self_calibrated)\n"
-    "Exit status: 0 calibrated, 2 bad input, 3 calibration impossible (the message says why and what to do).\n";
+const char kDescription[] =
+    "self_calibrate: estimates alpha_u, alpha_v, u0, v0 (no skew, no distortion) from a sequence of seabed images\n"
+    "without a calibration pattern: the camera must move over relief, turning about its optical axis and\n"
+    "rolling/pitching. Give either --bag with --image-topic, or --images.";
 
 struct Options {
   std::string bag, topic, images_dir, output, camera_name = "self_calibrated";
@@ -64,66 +51,51 @@ struct BadInput : std::invalid_argument {
   using std::invalid_argument::invalid_argument;
 };
 
-int parseInt(const std::string& option, const std::string& text, int min_value) {
-  size_t used = 0;
-  int v = 0;
-  try {
-    v = std::stoi(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != text.size() || v < min_value)
-    throw BadInput(option + " '" + text + "' must be an integer >= " + std::to_string(min_value));
-  return v;
+/// Declares the options into `o`; parseCommandLine() fills them.
+void addOptions(CLI::App& app, Options* o) {
+  app.add_option("--bag", o->bag,
+                 "a bag with sensor_msgs/Image (mono8, mono16, bgr8, rgb8, bayer...) or\n"
+                 "sensor_msgs/CompressedImage (JPEG, PNG) messages")
+      ->check(CLI::ExistingFile);
+  app.add_option("--image-topic", o->topic, "the bag's image topic, e.g. /camera/image_raw/compressed")
+      ->type_name("TOPIC");
+  app.add_option("--images", o->images_dir, "image files (png, jpg, tif, bmp, pgm, ppm), taken in name order")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--output", o->output,
+                 "camera_calibration_parsers YAML, with the 1-sigma of each parameter under\n'self_calibration'")
+      ->type_name("FILE")
+      ->required();
+  app.add_option("--step", o->step, "key frame every N frames: key frames must overlap but differ by a visible motion")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(1))
+      ->capture_default_str();
+  app.add_option("--max-frames", o->max_frames, "frames read, at least 2")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(2))
+      ->capture_default_str();
+  app.add_option("--start-frame", o->start_frame, "frames skipped first")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(0))
+      ->capture_default_str();
+  app.add_option("--initial-hfov-deg", o->initial_hfov_deg,
+                 "nominal horizontal field of view of the initial guess (degrees), in (1, 179)")
+      ->type_name("D")
+      ->check(exocet_common::numberIn(1.0, true, 179.0, true))
+      ->capture_default_str();
+  app.add_flag("--planar", o->planar,
+               "on a flat seabed, calibrate from the plane's homographies (needs roll and pitch)");
+  app.add_option("--seed", o->seed, "RANSAC's random seed")
+      ->type_name("S")
+      ->check(CLI::Range(0, std::numeric_limits<int>::max()))
+      ->capture_default_str();
+  app.add_option("--camera-name", o->camera_name, "camera_name in the YAML")->type_name("NAME")->capture_default_str();
+  app.footer("Exit status: 0 calibrated, 2 bad input, 3 calibration impossible (the message says why and what to do).");
 }
 
-Options parseOptions(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw BadInput("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--bag")
-      o.bag = value();
-    else if (a == "--image-topic")
-      o.topic = value();
-    else if (a == "--images")
-      o.images_dir = value();
-    else if (a == "--output")
-      o.output = value();
-    else if (a == "--camera-name")
-      o.camera_name = value();
-    else if (a == "--step")
-      o.step = parseInt(a, value(), 1);
-    else if (a == "--max-frames")
-      o.max_frames = parseInt(a, value(), 2);
-    else if (a == "--start-frame")
-      o.start_frame = parseInt(a, value(), 0);
-    else if (a == "--seed")
-      o.seed = static_cast<uint64_t>(parseInt(a, value(), 0));
-    else if (a == "--planar")
-      o.planar = true;
-    else if (a == "--initial-hfov-deg") {
-      const std::string text = value();
-      try {
-        size_t used = 0;
-        o.initial_hfov_deg = std::stod(text, &used);
-        if (used != text.size()) throw BadInput("");
-      } catch (const std::exception&) {
-        throw BadInput("--initial-hfov-deg '" + text + "' is not a number");
-      }
-      if (!(o.initial_hfov_deg > 1.0 && o.initial_hfov_deg < 179.0))
-        throw BadInput("--initial-hfov-deg " + text + " out of range (1, 179)");
-    } else {
-      throw BadInput("unknown option '" + a + "'");
-    }
-  }
+/// What the options cannot say alone: which input, and the topic that goes with a bag.
+void checkInputs(const Options& o) {
   if (o.bag.empty() == o.images_dir.empty()) throw BadInput("give either --bag (with --image-topic) or --images");
   if (!o.bag.empty() && o.topic.empty()) throw BadInput("--bag needs --image-topic");
-  if (o.output.empty()) throw BadInput("--output is required");
-  return o;
 }
 
 /// 8-bit grey from a decoded image file or compressed message, by its pixel type.
@@ -253,14 +225,12 @@ void writeCalibration(const Options& o, const selfcal::SelfCalibrationResult& re
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]) == "-h" || std::string(argv[i]) == "--help") {
-      std::cout << kUsage;
-      return 0;
-    }
-  }
+  Options o;
+  CLI::App app(kDescription, "self_calibrate");
+  addOptions(app, &o);
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
   try {
-    const Options o = parseOptions(argc, argv);
+    checkInputs(o);
     const std::string destination_problem = exocet_common::checkWritableDestination(o.output);
     if (!destination_problem.empty()) throw BadInput("--output: " + destination_problem);
 
@@ -297,11 +267,11 @@ int main(int argc, char** argv) {
     std::cout << "Wrote " << o.output << " (distortion not estimated: written as zero)\n";
     return 0;
   } catch (const BadInput& e) {
-    std::cerr << "self_calibrate: " << e.what() << "\n\n" << kUsage;
-    return 2;
+    std::cerr << "self_calibrate: " << e.what() << "\nRun 'self_calibrate --help' for the options.\n";
+    return exocet_common::kExitBadInput;
   } catch (const std::invalid_argument& e) {  // an image the converter refuses, a bad setting
     std::cerr << "self_calibrate: " << e.what() << "\n";
-    return 2;
+    return exocet_common::kExitBadInput;
   } catch (const selfcal::CalibrationImpossible& e) {
     std::cerr << "self_calibrate: calibration impossible: " << e.what() << "\n";
     return 3;

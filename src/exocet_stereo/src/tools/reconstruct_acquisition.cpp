@@ -9,53 +9,57 @@
 #include <string>
 #include <vector>
 
+#include "exocet_common/command_line.h"
+#include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/mesh/acquisition_reconstruction.h"
 #include "exocet_stereo/ros/acquisition_bag.h"
-
-namespace {
-
-int usage(const std::string& error) {
-  if (!error.empty()) std::cerr << "reconstruct_acquisition: " << error << "\n";
-  std::cerr << "usage: reconstruct_acquisition --bag ACQUISITION.bag --output-dir DIR [--method sgm] "
-               "[--min-depth-m 0.4] [--max-depth-m 1.0] [--voxel-m 0.002] [--min-confirmations 1] [--texture 1] "
-               "[--atlas-scale 1.0]\n"
-               "  --texture 0 keeps the surface untextured (vertex colours only); --atlas-scale (0, 1] downscales the "
-               "left images in the texture atlas.\n"
-               "  The bag: exocet_servo's acquisition_sequencer_node (left|right/image_raw, camera_info, pose per "
-               "stop).\n";
-  return error.empty() ? 0 : 2;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace exocet_stereo;
   std::string bag_path, output_dir;
   mesh::AcquisitionReconstructionConfig config;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string arg = argv[i];
-      if (arg == "--help" || arg == "-h") return usage("");
-      if (i + 1 >= argc) return usage("option " + arg + " needs a value");
-      const std::string value = argv[++i];
-      if (arg == "--bag") bag_path = value;
-      else if (arg == "--output-dir") output_dir = value;
-      else if (arg == "--method") config.depth.method = value;
-      else if (arg == "--min-depth-m") config.depth.min_depth_m = std::stod(value);
-      else if (arg == "--max-depth-m") config.depth.max_depth_m = std::stod(value);
-      else if (arg == "--voxel-m") config.fusion.voxel_m = std::stod(value);
-      else if (arg == "--min-confirmations") config.fusion.min_confirmations = std::stoi(value);
-      else if (arg == "--texture" && (value == "0" || value == "1")) config.texture = value == "1";
-      else if (arg == "--texture") return usage("--texture must be 0 or 1");
-      else if (arg == "--atlas-scale") config.texturing.atlas_scale = std::stod(value);
-      else return usage("unknown option " + arg);
-    }
-  } catch (const std::exception&) {
-    return usage("a numeric option has a value that is not a number");
-  }
-  if (bag_path.empty() || output_dir.empty()) return usage("--bag and --output-dir are required");
+  CLI::App app(
+      "reconstruct_acquisition: the offline reconstruction of an acquisition bag, written as fused_cloud.ply,\n"
+      "surface.ply, surface.obj and surface.wrl (with their texture atlas surface.png) into the output folder.",
+      "reconstruct_acquisition");
+  app.add_option("--bag", bag_path,
+                 "exocet_servo's acquisition_sequencer_node bag (left|right/image_raw, camera_info, pose\nper stop)")
+      ->type_name("ACQUISITION.bag")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--output-dir", output_dir, "folder of the PLY, OBJ and VRML files")->type_name("DIR")->required();
+  app.add_option("--method", config.depth.method, "dense stereo method of the depth maps")
+      ->check(CLI::IsMember(dense::denseStereoMethods()))
+      ->capture_default_str();
+  app.add_option("--min-depth-m", config.depth.min_depth_m, "nearest depth searched (metres), in (0, --max-depth-m)")
+      ->type_name("M")
+      ->capture_default_str();
+  app.add_option("--max-depth-m", config.depth.max_depth_m, "farthest depth searched (metres), at most 1e4")
+      ->type_name("M")
+      ->capture_default_str();
+  app.add_option("--voxel-m", config.fusion.voxel_m,
+                 "voxel of the fused cloud and cell of the surface (metres), in "
+                 "(0, 1e3]")
+      ->type_name("M")
+      ->capture_default_str();
+  app.add_option("--min-confirmations", config.fusion.min_confirmations,
+                 "other depth maps that must confirm a point, in [0, 64]")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--texture", config.texture, "1: texture the surface from the left images; 0: vertex colours only")
+      ->type_name("0|1")
+      ->check(CLI::IsMember({"0", "1"}))
+      ->default_str("1");
+  app.add_option("--atlas-scale", config.texturing.atlas_scale,
+                 "downscaling of the left images in the texture atlas, in (0, 1]")
+      ->type_name("S")
+      ->capture_default_str();
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
   const std::string problems = config.validate();
-  if (!problems.empty()) return usage(problems);
+  if (!problems.empty()) {
+    std::cerr << "reconstruct_acquisition: " << problems << "\n";
+    return exocet_common::kExitBadInput;
+  }
 
   const auto start = std::chrono::steady_clock::now();
   const auto elapsed = [&start] {

@@ -1,7 +1,7 @@
 /**
  * @file tile_json.h
  * @brief The JSON text of a written tile (one object, UTF-8), shared by the UDP notification and any log. The fields
- * are documented in config/tiles/UDP_NOTIFICATION.md. No JSON library: the object is flat and only written here.
+ * are documented in config/tiles/UDP_NOTIFICATION.md.
  */
 #pragma once
 
@@ -19,16 +19,13 @@ constexpr int kTileJsonVersion = 1;
  * @brief One JSON object describing `tile` (type "exocet_tile"): index, paths (null when not written), EPSG, UTM and
  * WGS 84 bounds, gsd, size, metadata (frames, times, altitude, close reason, extra), write time, ok and error.
  * @param tile the result of GeoTiffTileWriter::write (also a failed one: ok false, error set)
- * @return compact JSON on one line, no trailing newline; non-finite numbers as null
+ * @return compact JSON on one line, no trailing newline; non-finite numbers as null; bytes that are not valid UTF-8
+ * (e.g. a Latin-1 file name) as U+FFFD, so that the text is always valid UTF-8
  */
 std::string tileToJson(const WrittenTile& tile);
 
-/// `text` as a JSON string literal, quotes included: '"', '\\' and control characters escaped (\n, \t, ..., \u00XX);
-/// bytes that are not valid UTF-8 (e.g. a Latin-1 file name) become U+FFFD, so the output is always valid UTF-8.
-std::string jsonString(const std::string& text);
-
-/// `value` as a JSON number in the shortest form that reads back to the same double ("0.05", "6252000.5", "1e-07");
-/// "null" when not finite (JSON has no NaN / infinity). Locale-independent.
+/// `value` in the shortest form that reads back to the same double ("0.05", "6252000.5", "1e-07"), as GDAL metadata
+/// and command arguments take it; "null" when not finite. Locale-independent.
 std::string jsonNumber(double value);
 
 }  // namespace tiles

@@ -2,7 +2,7 @@
  * @file fundamental_ransac.h
  * @brief Robust fundamental matrix for one image pair of a multi-view set (2D4 report section 3.2.2): the project's
  * own Hartley normalised 8-point algorithm inside MSAC (adaptive number of samples, Sampson distance, refit on the
- * inliers), shared with the mosaic's camera self-calibration (exocet_mosaic/selfcal/fundamental_estimator.h).
+ * inliers), shared with the mosaic's camera self-calibration (exocet_common/geometry/fundamental_estimator.h).
  * OpenCV's FM_RANSAC is the reference in the tests. No ROS in it.
  *
  * Convention (OpenCV's): b^T F a = 0 for a pixel a of the first image and its match b in the second.
