@@ -1,5 +1,5 @@
 /**
- * Tests of the command lines of the built tools and benchmarks (parsed with CLI11 through tools/command_line.h):
+ * Tests of the command lines of the built tools and benchmarks (parsed with CLI11 through exocet_common/command_line.h):
  * --help exits 0 and names every option; an unknown option, a value out of range, a missing file exit 2 with a
  * message naming the option and the value; register_images prints its JSON object with the same keys.
  */
@@ -23,7 +23,7 @@
 
 namespace {
 
-using exocet_mosaic::testing::TempDir;
+using exocet_common::testing::TempDir;
 
 struct RunResult {
   int exit_code = -1;
