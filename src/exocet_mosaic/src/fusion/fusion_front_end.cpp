@@ -25,7 +25,8 @@ Eigen::Vector3d rollPitchYaw(const Eigen::Matrix3d& r) {
 }
 
 Eigen::Matrix3d fromRollPitchYaw(double roll_rad, double pitch_rad, double yaw_rad) {
-  return (Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch_rad, Eigen::Vector3d::UnitY()) *
+  return (Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(pitch_rad, Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(roll_rad, Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
 }
@@ -179,35 +180,38 @@ std::optional<std::pair<double, double>> FusionFrontEnd::viewRangeAt(double stam
   return std::make_pair(value, config_.altimeter_sigma_m * std::sqrt(factor));
 }
 
-std::optional<double> FusionFrontEnd::cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
+std::optional<ViewGeometry> FusionFrontEnd::viewWith(double stamp_s, const Eigen::Quaterniond& world_from_base,
                                                      const Eigen::Isometry3d& base_from_camera) const {
+  ViewGeometry view;
+  view.world_from_base = world_from_base;
+  // The altimeter's height (and its sigma) when it covers the stamp, else the operator's (taken as exact).
   if (!altimeter_frame_.empty()) {
     if (const auto range = viewRangeAt(stamp_s)) {
       if (const auto altimeter = mounts_(altimeter_frame_)) {
         try {
           const double height_m = cameraHeightFromAltimeter_m(range->first, world_from_base, altimeter->translation(),
                                                               base_from_camera.translation());
-          if (std::isfinite(height_m) && height_m > 0.0) return height_m;
+          if (std::isfinite(height_m) && height_m > 0.0) {
+            view.camera_height_m = height_m;
+            view.camera_height_sigma_m = range->second;
+            return view;
+          }
         } catch (const std::invalid_argument&) {
           // An altimeter beam that does not point down, or a height <= 0: the operator's height, if any.
         }
       }
     }
   }
-  return operator_height_m_;
+  if (!operator_height_m_) return std::nullopt;
+  view.camera_height_m = *operator_height_m_;
+  return view;
 }
 
-std::optional<ViewGeometry> FusionFrontEnd::viewWith(double stamp_s, const Eigen::Quaterniond& world_from_base,
+std::optional<double> FusionFrontEnd::cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
                                                      const Eigen::Isometry3d& base_from_camera) const {
-  const std::optional<double> h = cameraHeightAt(stamp_s, world_from_base, base_from_camera);
-  if (!h) return std::nullopt;
-  ViewGeometry view;
-  view.world_from_base = world_from_base;
-  view.camera_height_m = *h;
-  // The altimeter's sigma applies when the height is the altimeter's, not the operator's.
-  const auto range = altimeter_frame_.empty() ? std::nullopt : viewRangeAt(stamp_s);
-  view.camera_height_sigma_m = range && (!operator_height_m_ || *h != *operator_height_m_) ? range->second : 0.0;
-  return view;
+  const std::optional<ViewGeometry> view = viewWith(stamp_s, world_from_base, base_from_camera);
+  if (!view) return std::nullopt;
+  return view->camera_height_m;
 }
 
 std::optional<ViewGeometry> FusionFrontEnd::viewAt(double stamp_s, const Eigen::Isometry3d& base_from_camera) const {
