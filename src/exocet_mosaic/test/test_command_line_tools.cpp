@@ -77,6 +77,9 @@ TEST(CommandLineTools, HelpExitsZeroAndNamesEveryOption) {
        {"--config", "--output", "--seed", "--duration", "--preset", "--trajectory", "--waypoints", "--relief",
         "--seabed-image", "--seabed-pixel-size", "--ideal", "--encoding", "--image-storage", "--threads", "--set",
         "--print-config", "--quiet"}},
+      {"dive_import",
+       {"--images", "--nav", "--camera", "--output", "--image-times", "--start-time", "--fps", "--origin-lat",
+        "--origin-lon", "--encoding", "--image-storage", "--camera-pose", "t_unix_s"}},
       {"bench_dive_synth", bench},
       {"bench_selfcal", with_bench({"--runs"})},
       {"bench_fusion", with_bench({"--dive", "--no-cross-pass", "--monte-carlo", "--monte-carlo-set",
@@ -131,6 +134,7 @@ TEST(CommandLineTools, BadInputExitsTwoNamingTheOptionAndValue) {
       {"dive_synth", {"--config", scratch.file("none.yaml"), "--print-config"}, {"--config", "none.yaml"}},
       {"dive_synth", {"--seed"}, {"--seed"}},
       {"self_calibrate", {"--images", scratch.path()}, {"--output"}},
+      {"dive_import", {"--images", scratch.path(), "--nav", image, "--camera", image}, {"--output"}},
   };
   for (const Case& c : cases) {
     std::string command = c.tool;

@@ -627,16 +627,16 @@ TEST_F(DiveImportErrors, UsageErrorsAndHelp) {
   EXPECT_TRUE(help.err.empty()) << help.err;
   const RunResult none = runTool({}, dir_);
   EXPECT_EQ(none.exit_code, 2);
-  EXPECT_NE(none.err.find("missing required option --images"), std::string::npos) << none.err;
+  EXPECT_NE(none.err.find("--images is required"), std::string::npos) << none.err;
   const auto expectUsage = [&](std::vector<std::string> args, const std::string& part) {
     expectImportError([&] { sim::parseDiveImportArguments(args); }, sim::DiveImportError::Kind::kInput, {part});
   };
   std::vector<std::string> args = args_;
   args.insert(args.end(), {"--encoding", "rgb8"});
-  expectUsage(args, "--encoding: 'rgb8' is not one of bgr8, mono8");
+  expectUsage(args, "--encoding: rgb8 not in {bgr8,mono8}");
   args = args_;
   args.insert(args.end(), {"--image-storage=tiff"});
-  expectUsage(args, "--image-storage: 'tiff' is not one of raw, jpeg, png");
+  expectUsage(args, "--image-storage: tiff not in {raw,jpeg,png}");
   args = args_;
   args.insert(args.end(), {"--start-time", "5"});
   expectUsage(args, "cannot be combined");
@@ -648,7 +648,8 @@ TEST_F(DiveImportErrors, UsageErrorsAndHelp) {
   expectUsage(args, "--camera-pose");
   args = args_;
   args.insert(args.end(), {"--frobnicate", "1"});
-  expectUsage(args, "unknown option '--frobnicate'");
+  expectUsage(args, "--frobnicate");
+  expectUsage(args, "not expected");
   expectUsage({"--images", "a", "--nav", "b", "--camera", "c", "--output", "d"}, "--image-times");
   expectNoOutput();
 }

@@ -10,6 +10,7 @@
 #include <iomanip>
 #include <limits>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 
@@ -17,6 +18,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -288,49 +290,15 @@ ImageEncoding parseImageEncoding(const std::string& name) {
 
 std::string encodingName(ImageEncoding encoding) { return encoding == ImageEncoding::kBgr8 ? "bgr8" : "mono8"; }
 
-std::string diveImportUsage() {
-  return R"(Usage: dive_import --images DIR|VIDEO --nav NAV.csv --camera K.yaml --output OUT.bag
-                   [--image-times INDEX.csv | --start-time UNIX_S [--fps F]]
-                   [--origin-lat DEG --origin-lon DEG] [--encoding bgr8|mono8] [--image-storage raw|jpeg|png]
-                   [--camera-pose X,Y,Z,ROLL,PITCH,YAW] [--help]
+namespace {
 
-Imports a real dive (camera images + navigation CSV + camera intrinsics) into a bag with the layout of the
-simulator's: /camera/image_raw (or /camera/image_raw/compressed) + /camera/camera_info, /nav/odometry,
-/nav/depth, /nav/altitude, /nav/datum (geo-referenced dives), /tf_static.
+const char kDiveImportDescription[] =
+    "dive_import: imports a real dive (camera images + navigation CSV + camera intrinsics) into a bag with the\n"
+    "layout of the simulator's: /camera/image_raw (or /camera/image_raw/compressed) + /camera/camera_info,\n"
+    "/nav/odometry, /nav/depth, /nav/altitude, /nav/datum (geo-referenced dives), /tf_static.\n"
+    "Frame times: --image-times, or --start-time (with --fps for a folder).";
 
-Inputs
-  --images DIR|VIDEO   folder of images (.png .jpg .jpeg .tif .tiff .bmp, sorted by file name: zero-pad the
-                       numbers) or a video file (any format OpenCV/FFmpeg reads)
-  --nav NAV.csv        navigation CSV (conventions below)
-  --camera K.yaml      intrinsics: camera_calibration_parsers YAML (image_width, image_height, camera_matrix,
-                       distortion_coefficients) or the short form (image_width, image_height, K: [9], D: [4..5]).
-                       Every image must have this size.
-  --output OUT.bag     bag to write; written under a temporary name and renamed when complete
-
-Frame times (one of)
-  --image-times INDEX.csv   header with a time column (t_unix_s, t, time, stamp, ts: Unix seconds) and a file
-                            column (file, filename, image: matched by file name) or a frame column (frame,
-                            frame_index: frame number from 0 in sorted or video order)
-  --start-time UNIX_S       time of the first frame; frame k at UNIX_S + k / F
-  --fps F                   frame rate (Hz); required for a folder, defaults to the container's for a video
-
-Geo-reference
-  --origin-lat DEG --origin-lon DEG   WGS 84 origin of the CSV's x, y: the world frame becomes "utm", positions
-                                      UTM easting = origin easting + x, northing = origin northing + y; a
-                                      /nav/datum gives the zone and EPSG code. Without an origin or lat, lon
-                                      columns, the world frame is "map" and positions are written as given.
-
-Output
-  --encoding bgr8|mono8         pixel format of the images (default bgr8; mono8 converts to gray)
-  --image-storage raw|jpeg|png  sensor_msgs/Image (default raw) or CompressedImage
-  --camera-pose X,Y,Z,ROLL,PITCH,YAW
-                                camera optical frame (x right, y down, z along the view) in base_link: metres
-                                and degrees, R = Rz(yaw) Ry(pitch) Rx(roll). Default identity (the nav pose is
-                                the camera's). A downward camera whose image top points forward on a base_link
-                                (x forward, y left, z up) is 0,0,0,180,0,-90.
-  --help                        this text
-
-Navigation CSV
+const char kDiveImportConventions[] = R"(Navigation CSV
   One header row, comma-separated; '#' lines and blank lines skipped; names case-insensitive; other columns
   (e.g. source, target) ignored. One /nav/odometry per row (frame utm or map -> base_link).
   time         first of t_unix_s, t, time, stamp, ts: Unix seconds, never going backwards
@@ -350,8 +318,71 @@ Navigation CSV
   covariance diagonal is -1 (unknown). NaN or infinite values are errors.
 
 Exit status: 0 done, 2 bad arguments or input (the message names the argument, file, line and column),
-1 I/O failure, 128+N killed by signal N (SIGINT, SIGTERM). On any error no file is left under OUT.bag.
-)";
+1 I/O failure, 128+N killed by signal N (SIGINT, SIGTERM). On any error no file is left under OUT.bag.)";
+
+/// The tool's options as given; parseDiveImportArguments converts and checks them with messages naming each.
+struct DiveImportArgumentText {
+  std::string images, nav, camera, output, image_times, start_time, fps, origin_lat, origin_lon, encoding,
+      image_storage, camera_pose;
+};
+
+/// The command line of dive_import, filling `text`.
+std::unique_ptr<CLI::App> diveImportCommandLine(DiveImportArgumentText* text) {
+  auto app = std::make_unique<CLI::App>(kDiveImportDescription, "dive_import");
+  const auto option = [&](const std::string& name, std::string* value, const std::string& value_name,
+                          const std::string& group, const std::string& what) {
+    CLI::Option* added = app->add_option(name, *value, what)->group(group);
+    if (!value_name.empty()) added->type_name(value_name);
+    return added;
+  };
+  option("--images", &text->images, "DIR|VIDEO", "Inputs",
+         "folder of images (.png .jpg .jpeg .tif .tiff .bmp, sorted by file name: zero-pad\n"
+         "the numbers) or a video file (any format OpenCV/FFmpeg reads)")
+      ->required();
+  option("--nav", &text->nav, "NAV.csv", "Inputs", "navigation CSV (conventions below)")->required();
+  option("--camera", &text->camera, "K.yaml", "Inputs",
+         "intrinsics: camera_calibration_parsers YAML (image_width, image_height,\n"
+         "camera_matrix, distortion_coefficients) or the short form (image_width,\n"
+         "image_height, K: [9], D: [4..5]). Every image must have this size.")
+      ->required();
+  option("--output", &text->output, "OUT.bag", "Inputs",
+         "bag to write; written under a temporary name and renamed when complete")
+      ->required();
+  option("--image-times", &text->image_times, "INDEX.csv", "Frame times (one of)",
+         "header with a time column (t_unix_s, t, time, stamp, ts: Unix seconds) and a file\n"
+         "column (file, filename, image: matched by file name) or a frame column (frame,\n"
+         "frame_index: frame number from 0 in sorted or video order)");
+  option("--start-time", &text->start_time, "UNIX_S", "Frame times (one of)",
+         "time of the first frame, in [0, 4294967295] s; frame k at UNIX_S + k / F");
+  option("--fps", &text->fps, "F", "Frame times (one of)",
+         "frame rate (Hz), in (0, 100000]; required for a folder, defaults to the container's\n"
+         "for a video");
+  option("--origin-lat", &text->origin_lat, "DEG", "Geo-reference",
+         "WGS 84 origin of the CSV's x, y (latitude in [-90, 90], longitude in [-180, 360)):\n"
+         "the world frame becomes \"utm\", positions UTM easting = origin easting + x,\n"
+         "northing = origin northing + y; a /nav/datum gives the zone and EPSG code. Without\n"
+         "an origin or lat, lon columns, the world frame is \"map\" and positions are written\n"
+         "as given.");
+  option("--origin-lon", &text->origin_lon, "DEG", "Geo-reference", "given with --origin-lat");
+  option("--encoding", &text->encoding, "", "Output",
+         "pixel format of the images (default bgr8; mono8 converts to gray)")
+      ->check(CLI::IsMember({encodingName(ImageEncoding::kBgr8), encodingName(ImageEncoding::kMono8)}));
+  option("--image-storage", &text->image_storage, "", "Output", "sensor_msgs/Image (default raw) or CompressedImage")
+      ->check(CLI::IsMember({"raw", "jpeg", "png"}));
+  option("--camera-pose", &text->camera_pose, "X,Y,Z,ROLL,PITCH,YAW", "Output",
+         "camera optical frame (x right, y down, z along the view) in base_link: metres\n"
+         "and degrees, R = Rz(yaw) Ry(pitch) Rx(roll). Default identity (the nav pose is\n"
+         "the camera's). A downward camera whose image top points forward on a base_link\n"
+         "(x forward, y left, z up) is 0,0,0,180,0,-90.");
+  app->footer(kDiveImportConventions);
+  return app;
+}
+
+}  // namespace
+
+std::string diveImportUsage() {
+  DiveImportArgumentText ignored;
+  return diveImportCommandLine(&ignored)->help();
 }
 
 namespace {
@@ -379,61 +410,46 @@ Eigen::Isometry3d parseCameraPose(const std::string& text) {
 }
 
 DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args) {
-  static const std::set<std::string> kValueOptions = {
-      "--images", "--nav",        "--camera",     "--output",   "--image-times",   "--start-time",
-      "--fps",    "--origin-lat", "--origin-lon", "--encoding", "--image-storage", "--camera-pose"};
-  std::map<std::string, std::string> values;
-  for (size_t i = 0; i < args.size(); ++i) {
-    std::string name = args[i];
-    if (name == "--help" || name == "-h") {
-      DiveImportOptions help;
-      help.help = true;
-      return help;
-    }
-    std::optional<std::string> value;
-    const auto equals = name.find('=');
-    if (name.compare(0, 2, "--") == 0 && equals != std::string::npos) {
-      value = name.substr(equals + 1);
-      name = name.substr(0, equals);
-    }
-    if (!kValueOptions.count(name)) {
-      if (name.compare(0, 1, "-") == 0)
-        failInput("unknown option '" + name + "'; options: " +
-                  join(std::vector<std::string>(kValueOptions.begin(), kValueOptions.end()), " ") + " --help");
-      failInput("unexpected argument '" + name + "' (every input is given by an option; see --help)");
-    }
-    if (!value) {
-      if (i + 1 >= args.size() || args[i + 1].compare(0, 2, "--") == 0) failInput(name + " needs a value");
-      value = args[++i];
-    }
-    if (!values.emplace(name, *value).second) failInput(name + " is given twice");
+  DiveImportArgumentText text;
+  const std::unique_ptr<CLI::App> app = diveImportCommandLine(&text);
+  try {
+    std::vector<std::string> reversed(args.rbegin(), args.rend());  // CLI11 takes them last first
+    app->parse(reversed);
+  } catch (const CLI::CallForHelp&) {
+    DiveImportOptions help;
+    help.help = true;
+    return help;
+  } catch (const CLI::ParseError& e) {
+    failInput(std::string(e.what()) + " (see --help)");
   }
 
   DiveImportOptions o;
-  const auto take = [&](const std::string& name, std::string* out) {
-    const auto it = values.find(name);
-    if (it == values.end()) return false;
-    *out = it->second;
-    if (out->empty()) failInput(name + " has an empty value");
+  const auto take = [&](const std::string& name, const std::string& given, std::string* out) {
+    if (app->count(name) == 0) return false;
+    if (given.empty()) failInput(name + " has an empty value");
+    *out = given;
     return true;
   };
-  const std::vector<std::pair<std::string, std::string*>> required = {
-      {"--images", &o.images_path}, {"--nav", &o.nav_path}, {"--camera", &o.camera_path}, {"--output", &o.output_path}};
-  for (const auto& [name, out] : required)
-    if (!take(name, out)) failInput("missing required option " + name + " (see --help)");
-  take("--image-times", &o.image_times_path);
-  std::string text;
-  if (take("--start-time", &text)) o.start_time_s = parseOptionNumber("--start-time", text);
-  if (take("--fps", &text)) o.fps = parseOptionNumber("--fps", text);
+  take("--images", text.images, &o.images_path);
+  take("--nav", text.nav, &o.nav_path);
+  take("--camera", text.camera, &o.camera_path);
+  take("--output", text.output, &o.output_path);
+  take("--image-times", text.image_times, &o.image_times_path);
+  std::string start_text;
+  if (take("--start-time", text.start_time, &start_text))
+    o.start_time_s = parseOptionNumber("--start-time", start_text);
+  std::string fps_text;
+  if (take("--fps", text.fps, &fps_text)) o.fps = parseOptionNumber("--fps", fps_text);
   if (!o.image_times_path.empty() && (o.start_time_s || o.fps))
     failInput("--image-times cannot be combined with --start-time/--fps: give one way of timing the frames");
   if (o.image_times_path.empty() && !o.start_time_s)
     failInput("frame times needed: give --image-times INDEX.csv or --start-time UNIX_S (and --fps for a folder)");
   if (o.start_time_s && (*o.start_time_s < 0.0 || *o.start_time_s > kMaxUnixTime_s))
-    failInput("--start-time: " + text + " is not within [0, 4294967295] seconds since the Unix epoch");
+    failInput("--start-time: " + start_text + " is not within [0, 4294967295] seconds since the Unix epoch");
   if (o.fps && !(*o.fps > 0.0 && *o.fps <= 100000.0)) failInput("--fps: must be within (0, 100000] Hz");
   std::string lat_text, lon_text;
-  const bool has_lat = take("--origin-lat", &lat_text), has_lon = take("--origin-lon", &lon_text);
+  const bool has_lat = take("--origin-lat", text.origin_lat, &lat_text);
+  const bool has_lon = take("--origin-lon", text.origin_lon, &lon_text);
   if (has_lat != has_lon) failInput("--origin-lat and --origin-lon must be given together");
   if (has_lat) {
     GeoOrigin origin;
@@ -445,13 +461,10 @@ DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args)
       failInput("--origin-lon: " + lon_text + " is not within [-180, 360) degrees");
     o.origin = origin;
   }
-  if (take("--encoding", &text)) o.encoding = parseImageEncoding(text);
-  if (take("--image-storage", &text)) {
-    if (text != "raw" && text != "jpeg" && text != "png")
-      failInput("--image-storage: '" + text + "' is not one of raw, jpeg, png");
-    o.image_storage = text;
-  }
-  if (take("--camera-pose", &text)) o.base_from_camera = parseCameraPose(text);
+  std::string value;
+  if (take("--encoding", text.encoding, &value)) o.encoding = parseImageEncoding(value);
+  if (take("--image-storage", text.image_storage, &value)) o.image_storage = value;
+  if (take("--camera-pose", text.camera_pose, &value)) o.base_from_camera = parseCameraPose(value);
   return o;
 }
 

@@ -89,9 +89,9 @@ struct DiveImportOptions {
 std::string diveImportUsage();
 
 /**
- * @brief Parses the tool's arguments (without the program name). Accepts "--name value" and "--name=value".
- * Throws DiveImportError (kInput) naming the argument and its allowed values for an unknown option, a missing or
- * malformed value, a missing required option or conflicting options.
+ * @brief Parses the tool's arguments (without the program name) with CLI11. Accepts "--name value" and
+ * "--name=value". Throws DiveImportError (kInput) naming the argument and its allowed values for an unknown option, a
+ * missing or malformed value, a missing required option or conflicting options.
  */
 DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args);
 
