@@ -63,7 +63,7 @@ SeabedRenderer::SeabedRenderer(const CameraModel& camera, const ImagingConfig& i
 }
 
 cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camera, double t_s, int frame_index,
-                                       cv::Mat* depth_z_m) {
+                                       cv::Mat* depth_z_m) const {
   (void)frame_index;
   const int W = camera_.width, H = camera_.height;
   FrameGeometry g;
@@ -268,14 +268,7 @@ cv::Mat SeabedRenderer::renderRadiance(const Eigen::Isometry3d& world_from_camer
       }
     }
   };
-  if (threads_ > 1) {
-    const int old = cv::getNumThreads();
-    cv::setNumThreads(threads_);
-    cv::parallel_for_(cv::Range(0, H), render_rows, threads_ * 4);
-    cv::setNumThreads(old);
-  } else {
-    render_rows(cv::Range(0, H));
-  }
+  render_rows(cv::Range(0, H));
   if (imaging_.marine_snow_per_m3 > 0.0) addMarineSnow(world_from_camera, t_s, depth, &radiance);
   if (depth_z_m) *depth_z_m = depth;
   return radiance;
@@ -404,7 +397,7 @@ cv::Mat SeabedRenderer::encode(const cv::Mat& radiance_rgb, int frame_index, con
 }
 
 cv::Mat SeabedRenderer::render(const std::function<Eigen::Isometry3d(double)>& pose_at, double t_s, int frame_index,
-                               const std::string& encoding) {
+                               const std::string& encoding) const {
   if (!isSupportedEncoding(encoding))
     throw std::invalid_argument("image encoding '" + encoding + "' is not one of bgr8, rgb8, mono8, mono16, bayer_rggb8");
   cv::Mat radiance;

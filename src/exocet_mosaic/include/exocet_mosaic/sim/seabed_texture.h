@@ -7,6 +7,8 @@
  * once per frame, for the patch that covers the camera footprint at the levels it needs, then samples the
  * patch bilinearly: so a texture may be procedural and unbounded (generated lazily in tiles, cached within a
  * memory budget) or an image held in memory, and the renderer does not know which.
+ *
+ * The simulator renders several frames at once: albedoPatch() and heightPatch() must allow concurrent calls.
  */
 #pragma once
 
