@@ -127,10 +127,10 @@ class TextureWindow {
     const int iy = std::clamp(static_cast<int>(std::floor((y_m - y0_m_) / texel_m_)), 0, rows_ - 2);
     const T* r0 = &texel(ix, iy);
     const T* r1 = &texel(ix, iy + 1);
-    __builtin_prefetch(r0);
-    __builtin_prefetch(r0 + 1);
-    __builtin_prefetch(r1);
-    __builtin_prefetch(r1 + 1);
+    prefetchLine(r0);
+    prefetchLine(r0 + 1);
+    prefetchLine(r1);
+    prefetchLine(r1 + 1);
   }
 
   /// Bilinear sample at world point (x_m, y_m); clamped to the window's border as TexturePatch::sample().
@@ -177,6 +177,15 @@ class TextureWindow {
   }
 
  private:
+  static void prefetchLine(const T* p) {
+#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+    // An asm statement: GCC 12 deletes __builtin_prefetch and _mm_prefetch of an address read through cv::Mat_.
+    asm volatile("prefetcht0 %0" : : "m"(*reinterpret_cast<const char*>(p)));
+#else
+    __builtin_prefetch(p);
+#endif
+  }
+
   /// A contiguous patch is one tile larger than any window: index arithmetic then never leaves it.
   static constexpr int kOneTileShift = 30;
 
