@@ -18,11 +18,12 @@ for config in "${configs[@]}"; do
   [[ -f $config ]] || { echo "make-bags: no dive description $config" >&2; exit 1; }
   name=$(basename "$config" .yaml)
   bag=bags/$name.bag
-  # What makes the bag: the description, the simulator library and the bag writer's sources (dive_synth itself is
-  # relinked whenever any node's code changes, which does not change the bag).
+  # What makes the bag: the description, the simulator library and the sources of the bag writing (dive_synth itself
+  # is relinked whenever any node's code changes, which does not change the bag).
   fresh=1
   for input in $config devel/lib/libexocet_mosaic_sim.so src/exocet_mosaic/src/tools/dive_synth.cpp \
-      src/exocet_mosaic/src/ros/dive_bag_writer.cpp src/exocet_mosaic/include/exocet_mosaic/ros/dive_bag_writer.h; do
+      src/exocet_mosaic/src/ros/dive_bag_writer.cpp src/exocet_mosaic/include/exocet_mosaic/ros/dive_bag_writer.h \
+      src/exocet_mosaic/src/ros/synthetic_dive_bag.cpp; do
     [[ $bag -nt $input ]] || fresh=0
   done
   if [[ -f $bag && $fresh == 1 ]]; then

@@ -79,8 +79,11 @@ if grep -A1 -E "REQUIRED process \[" "$log" | grep -v -E "REQUIRED process \[til
 fi
 
 echo "run-demo: plotting the trajectories"
+# dive_synth writes the true camera centres beside the bag: the reference of the fused (camera) tracks.
+camera_truth=()
+[[ -f ${bag%.bag}.ground_truth.csv ]] && camera_truth=(--camera-truth "${bag%.bag}.ground_truth.csv")
 rosrun exocet_mosaic plot_trajectories --input "$out" --output "$out/trajectories.png" \
-  --dive-name "$(basename "$bag" .bag)"
+  --dive-name "$(basename "$bag" .bag)" "${camera_truth[@]}"
 
 echo "run-demo: tiles overview and gdalinfo summaries"
 tiles=("$out"/tiles/tile_*.tif)
@@ -134,5 +137,8 @@ print('  dead reckoning: RMS error %s, %s at the end' % (m(dr['rms_horizontal_er
                                                         m(dr['final_horizontal_error_m'])))
 print('  USBL fixes:     RMS error %s (median sigma %s)' % (m(usbl['rms_horizontal_error_m']),
                                                            m(usbl['median_horizontal_sigma_m'])))
+for key, label in (('fused', 'fused track:   '), ('smoothed', 'RTS smoothed:  ')):
+    if s.get(key):
+        print('  %s RMS error %s (camera centre)' % (label, m(s[key]['rms_horizontal_error_m'])))
 print('Look at %s' % s['plot'])
 EOF

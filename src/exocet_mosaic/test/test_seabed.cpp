@@ -132,6 +132,41 @@ TEST(ProceduralSeabedTexture, SameSeedSameBytesWhateverTheOrderCacheAndThreads) 
   EXPECT_GT(a.tilesGenerated(), b.tilesGenerated());
 }
 
+// The renderer samples windows over the cached tiles instead of copied patches: same geometry, same bits, tile
+// borders (where a sample's four texels lie in up to four tiles) and the clamped border included; and a window
+// keeps its tiles when the cache evicts them.
+TEST(ProceduralSeabedTexture, WindowSamplesEqualPatchSamplesBitForBit) {
+  ProceduralSeabedConfig c;
+  c.seed = 77;
+  c.cache_budget_mb = 0.8;  // about one tile: the window's tiles are evicted as it is built
+  ProceduralSeabedTexture t(c);
+  const WorldRect area{-0.61, 0.37, 0.58, 1.43};  // around tile corners at 0 and 0.512 m, negative indices
+  for (const int level : {0, 1, 3}) {
+    const sim::TextureWindow<cv::Vec3f> window = t.albedoWindow(level, area);
+    const sim::TexturePatch<cv::Vec3f> patch = t.albedoPatch(level, area);
+    ASSERT_EQ(window.cols(), patch.texels.cols);
+    ASSERT_EQ(window.rows(), patch.texels.rows);
+    EXPECT_EQ(window.level(), level);
+    EXPECT_EQ(window.texelSize_m(), patch.texel_m);
+    for (int j = 0; j < patch.texels.rows; j += 7)
+      for (int i = 0; i < patch.texels.cols; i += 5)
+        ASSERT_TRUE(sameBytes(window.texel(i, j), patch.texels(j, i)))
+            << "level " << level << " texel " << i << ", " << j;
+    sim::RandomStream rs(5, level);
+    int across_tiles = 0;
+    const double tile_m = c.tile_texels * patch.texel_m;
+    for (int k = 0; k < 20000; ++k) {
+      // Beyond the area too: the clamped border.
+      const double x = area.x_min_m - 0.05 + rs.uniform() * (area.x_max_m - area.x_min_m + 0.1);
+      const double y = area.y_min_m - 0.05 + rs.uniform() * (area.y_max_m - area.y_min_m + 0.1);
+      if (std::abs(x - tile_m * std::round(x / tile_m)) < patch.texel_m) ++across_tiles;
+      ASSERT_TRUE(sameBytes(window.sample(x, y), patch.sample(x, y))) << "level " << level << " at " << x << ", " << y;
+    }
+    EXPECT_GT(across_tiles, 0) << "no sample straddled a tile border at level " << level;
+  }
+  EXPECT_LE(t.cachedBytes(), static_cast<size_t>(0.8 * 1024 * 1024));
+}
+
 TEST(ProceduralSeabedTexture, DifferentSeedsDiffer) {
   ProceduralSeabedConfig c1, c2;
   c1.seed = 1;

@@ -178,22 +178,38 @@ void DiveBagWriter::writeCameraFrame(const sim::CameraFrame& frame, const sim::C
   } else {
     sensor_msgs::CompressedImage msg;
     msg.header = h;
-    std::vector<int> params;
-    std::string ext;
-    if (options_.image_storage == ImageStorage::kJpeg) {
-      ext = ".jpg";
-      params = {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality};
-      msg.format = frame.encoding + "; jpeg compressed " + (frame.image.channels() == 3 ? "bgr8" : "");
+    if (frame.compressed.empty()) {
+      sim::CameraFrame compressed;
+      compressed.index = frame.index;
+      compressed.image = frame.image;
+      compressed.encoding = frame.encoding;
+      compressFrame(&compressed);
+      msg.data = std::move(compressed.compressed);
+      msg.format = std::move(compressed.compressed_format);
     } else {
-      ext = ".png";
-      params = {cv::IMWRITE_PNG_COMPRESSION, 3};
-      msg.format = frame.encoding + "; png compressed " + (frame.image.channels() == 3 ? "bgr8" : "");
+      msg.data = frame.compressed;
+      msg.format = frame.compressed_format;
     }
-    if (!cv::imencode(ext, frame.image, msg.data, params))
-      throw std::runtime_error("cannot encode frame " + std::to_string(frame.index) + " as " + ext);
     write(topics::kImageCompressed, frame.stamp_s, msg);
   }
   write(topics::kCameraInfo, frame.stamp_s, toCameraInfo(camera, frame.stamp_s, frames::kCameraOptical));
+}
+
+void DiveBagWriter::compressFrame(sim::CameraFrame* frame) const {
+  if (options_.image_storage == ImageStorage::kRaw) return;
+  std::vector<int> params;
+  std::string ext;
+  if (options_.image_storage == ImageStorage::kJpeg) {
+    ext = ".jpg";
+    params = {cv::IMWRITE_JPEG_QUALITY, options_.jpeg_quality};
+    frame->compressed_format = frame->encoding + "; jpeg compressed " + (frame->image.channels() == 3 ? "bgr8" : "");
+  } else {
+    ext = ".png";
+    params = {cv::IMWRITE_PNG_COMPRESSION, 3};
+    frame->compressed_format = frame->encoding + "; png compressed " + (frame->image.channels() == 3 ? "bgr8" : "");
+  }
+  if (!cv::imencode(ext, frame->image, frame->compressed, params))
+    throw std::runtime_error("cannot encode frame " + std::to_string(frame->index) + " as " + ext);
 }
 
 void DiveBagWriter::writeNavOdometry(const sim::PoseRecord& pose) {

@@ -1,10 +1,14 @@
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 
 #include <cmath>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_mosaic/sim/ordered_work_pool.h"
+#include "exocet_mosaic/sim/random.h"
 
 namespace exocet_mosaic {
 namespace sim {
@@ -112,7 +116,6 @@ DiveSynthesizer::DiveSynthesizer(const DiveSynthesisConfig& config, SeabedTextur
                 config.trajectory.altitude_m - config.rig.lever_arm_m.z()),
       duration_s_(config.duration_s > 0.0 ? std::min(config.duration_s, trajectory_.duration_s())
                                           : trajectory_.duration_s()) {
-  renderer_.setThreads(config.threads);
   if (relief_->maxHeight_m() > config.trajectory.altitude_m * 0.8 - config.trajectory.altitude_variation_m)
     throw std::invalid_argument("trajectory.altitude_m = " + std::to_string(config.trajectory.altitude_m) +
                                 " m is too low over this relief (highest point " +
@@ -152,11 +155,36 @@ WorldRect DiveSynthesizer::footprintOnReferencePlane(double t_s) const {
   return r;
 }
 
+FrameTruth DiveSynthesizer::renderFrame(int k, bool dropped, const DiveSink& sink) const {
+  const double t = k / config_.rig.fps;
+  FrameTruth truth;
+  truth.vehicle = trajectory_.stateAt(t);
+  const Eigen::Isometry3d local = cameraPoseLocal(t);
+  truth.world_from_camera = local;
+  truth.world_from_camera.translation() = toWorld(local.translation());
+  truth.camera_altitude_m = rayToSeabed_m(local.translation(), local.linear().col(2), *relief_);
+  truth.ground_sample_distance_m = truth.camera_altitude_m / std::sqrt(config_.rig.camera.fx * config_.rig.camera.fy);
+  const Eigen::Vector3d c = truth.world_from_camera.translation();
+  truth.latlon_deg = gridToLatLon(config_.geo, c.x(), c.y());
+  truth.frame.stamp_s = config_.start_time_unix_s + t;
+  truth.frame.index = k;
+  truth.frame.encoding = config_.rig.encoding;
+  truth.dropped = dropped;
+  if (!truth.dropped) {
+    truth.frame.image = renderer_.render([this](double ts) { return cameraPoseLocal(ts); }, t, k, config_.rig.encoding);
+    if (sink.prepare_frame) sink.prepare_frame(&truth);
+  }
+  return truth;
+}
+
 void DiveSynthesizer::run(const DiveSink& sink) {
   NavigationSensorSimulator nav(config_.navigation, config_.geo, config_.seabed_depth_m, config_.start_time_unix_s,
                                 config_.seed, [this](double x, double y) { return relief_->heightAt_m(x, y); });
-  RandomStream drops(config_.seed, 201);
   const int frames = frameCount();
+  // Lost frames drawn in frame order before any rendering: the draws cannot depend on which thread renders what.
+  std::vector<char> dropped(static_cast<size_t>(frames), 0);
+  RandomStream drops(config_.seed, 201);
+  for (int k = 1; k < frames; ++k) dropped[static_cast<size_t>(k)] = drops.chance(config_.rig.drop_probability);
   long gt_ticks = -1;
   auto emit_ground_truth_until = [&](double t) {
     const long last = static_cast<long>(std::floor(t * config_.ground_truth_rate_hz + 1e-9));
@@ -165,25 +193,17 @@ void DiveSynthesizer::run(const DiveSink& sink) {
       if (sink.ground_truth) sink.ground_truth(nav.groundTruth(trajectory_.stateAt(gt_ticks / config_.ground_truth_rate_hz)));
     }
   };
-  const auto pose_at = [this](double t) { return cameraPoseLocal(t); };
+  // Frames are rendered ahead on the workers (each frame a function of its index alone) while this thread emits
+  // everything in time order; `ahead` bounds the frames held in memory.
+  std::optional<OrderedWorkPool<FrameTruth>> pool;
+  if (config_.threads > 1 && frames > 1)
+    pool.emplace(frames, config_.threads, 2 * config_.threads,
+                 [&](int k) { return renderFrame(k, dropped[static_cast<size_t>(k)], sink); });
   for (int k = 0; k < frames; ++k) {
     const double t = k / config_.rig.fps;
     nav.advanceTo(trajectory_, t, sink.navigation);
     emit_ground_truth_until(t);
-    FrameTruth truth;
-    truth.vehicle = trajectory_.stateAt(t);
-    const Eigen::Isometry3d local = cameraPoseLocal(t);
-    truth.world_from_camera = local;
-    truth.world_from_camera.translation() = toWorld(local.translation());
-    truth.camera_altitude_m = rayToSeabed_m(local.translation(), local.linear().col(2), *relief_);
-    truth.ground_sample_distance_m = truth.camera_altitude_m / std::sqrt(config_.rig.camera.fx * config_.rig.camera.fy);
-    const Eigen::Vector3d c = truth.world_from_camera.translation();
-    truth.latlon_deg = gridToLatLon(config_.geo, c.x(), c.y());
-    truth.frame.stamp_s = config_.start_time_unix_s + t;
-    truth.frame.index = k;
-    truth.frame.encoding = config_.rig.encoding;
-    truth.dropped = k > 0 && drops.chance(config_.rig.drop_probability);
-    if (!truth.dropped) truth.frame.image = renderer_.render(pose_at, t, k, config_.rig.encoding);
+    const FrameTruth truth = pool ? pool->take(k) : renderFrame(k, dropped[static_cast<size_t>(k)], sink);
     if (sink.frame) sink.frame(truth);
     if (sink.progress) sink.progress(k + 1, frames);
   }

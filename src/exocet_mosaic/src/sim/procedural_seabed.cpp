@@ -983,6 +983,11 @@ struct ProceduralSeabedTexture::Impl {
   explicit Impl(const ProceduralSeabedConfig& c) : model(c), cache(budgetBytes(c)) {}
 
   std::shared_ptr<const cv::Mat_<cv::Vec3f>> generate(int level, int64_t tx, int64_t ty) const;
+  /// Tile (tx, ty) of `level`, from the cache or generated into it. Call with `mutex` held.
+  std::shared_ptr<const cv::Mat_<cv::Vec3f>> tile(int level, int64_t tx, int64_t ty);
+  /// Global texel indices [i0, i1] x [j0, j1] covering `area` at `level`; throws as albedoPatch() documents.
+  void texelRange(int level, const WorldRect& area, const char* who, int64_t* i0, int64_t* i1, int64_t* j0,
+                  int64_t* j1) const;
 
   SeabedModel model;
   mutable std::mutex mutex;
@@ -1065,41 +1070,68 @@ int ProceduralSeabedTexture::maxLevel() const { return impl_->model.config().max
 
 const ProceduralSeabedConfig& ProceduralSeabedTexture::config() const { return impl_->model.config(); }
 
-TexturePatch<cv::Vec3f> ProceduralSeabedTexture::albedoPatch(int level, const WorldRect& area) {
-  if (level < 0 || level > maxLevel())
+std::shared_ptr<const cv::Mat_<cv::Vec3f>> ProceduralSeabedTexture::Impl::tile(int level, int64_t tx, int64_t ty) {
+  const TileKey key{level, tx, ty};
+  auto found = cache.find(key);
+  if (!found) {
+    found = generate(level, tx, ty);
+    ++generated;
+    cache.insert(key, found);
+  }
+  return found;
+}
+
+void ProceduralSeabedTexture::Impl::texelRange(int level, const WorldRect& area, const char* who, int64_t* i0,
+                                               int64_t* i1, int64_t* j0, int64_t* j1) const {
+  if (level < 0 || level > model.config().max_level)
     throw std::out_of_range("ProceduralSeabedTexture: level " + std::to_string(level) + " outside [0, " +
-                            std::to_string(maxLevel()) + "]");
-  checkArea(area, "ProceduralSeabedTexture::albedoPatch");
-  const double w = impl_->model.levelParams(level).texel_m;
-  int64_t i0, i1, j0, j1;
-  sampleRange(area.x_min_m, area.x_max_m, 0.5 * w, w, &i0, &i1);
-  sampleRange(area.y_min_m, area.y_max_m, 0.5 * w, w, &j0, &j1);
-  const size_t cols = static_cast<size_t>(i1 - i0 + 1), rows = static_cast<size_t>(j1 - j0 + 1);
+                            std::to_string(model.config().max_level) + "]");
+  checkArea(area, who);
+  const double w = model.levelParams(level).texel_m;
+  sampleRange(area.x_min_m, area.x_max_m, 0.5 * w, w, i0, i1);
+  sampleRange(area.y_min_m, area.y_max_m, 0.5 * w, w, j0, j1);
+  const size_t cols = static_cast<size_t>(*i1 - *i0 + 1), rows = static_cast<size_t>(*j1 - *j0 + 1);
   if (cols * rows > kMaxPatchTexels)
-    throw std::invalid_argument("ProceduralSeabedTexture::albedoPatch: " + std::to_string(cols) + " x " +
-                                std::to_string(rows) + " texels at level " + std::to_string(level) +
+    throw std::invalid_argument(std::string(who) + ": " + std::to_string(cols) + " x " + std::to_string(rows) +
+                                " texels at level " + std::to_string(level) +
                                 " exceeds 64 Mtexels; use a coarser level");
+}
+
+TexturePatch<cv::Vec3f> ProceduralSeabedTexture::albedoPatch(int level, const WorldRect& area) {
+  int64_t i0, i1, j0, j1;
+  impl_->texelRange(level, area, "ProceduralSeabedTexture::albedoPatch", &i0, &i1, &j0, &j1);
+  const double w = impl_->model.levelParams(level).texel_m;
   TexturePatch<cv::Vec3f> patch;
   patch.level = level;
   patch.texel_m = w;
   patch.x0_m = (static_cast<double>(i0) + 0.5) * w;
   patch.y0_m = (static_cast<double>(j0) + 0.5) * w;
   std::lock_guard<std::mutex> lock(impl_->mutex);
-  const int n = impl_->model.config().tile_texels;
   assemble<cv::Vec3f>(
-      n, i0, j0, static_cast<int>(cols), static_cast<int>(rows),
-      [&](int64_t tx, int64_t ty) {
-        const TileKey key{level, tx, ty};
-        auto tile = impl_->cache.find(key);
-        if (!tile) {
-          tile = impl_->generate(level, tx, ty);
-          ++impl_->generated;
-          impl_->cache.insert(key, tile);
-        }
-        return tile;
-      },
-      &patch.texels);
+      impl_->model.config().tile_texels, i0, j0, static_cast<int>(i1 - i0 + 1), static_cast<int>(j1 - j0 + 1),
+      [&](int64_t tx, int64_t ty) { return impl_->tile(level, tx, ty); }, &patch.texels);
   return patch;
+}
+
+TextureWindow<cv::Vec3f> ProceduralSeabedTexture::albedoWindow(int level, const WorldRect& area) {
+  int64_t i0, i1, j0, j1;
+  impl_->texelRange(level, area, "ProceduralSeabedTexture::albedoWindow", &i0, &i1, &j0, &j1);
+  const double w = impl_->model.levelParams(level).texel_m;
+  const int n = impl_->model.config().tile_texels;
+  const int64_t tx0 = floorDiv(i0, n), tx1 = floorDiv(i1, n), ty0 = floorDiv(j0, n), ty1 = floorDiv(j1, n);
+  std::vector<TextureWindow<cv::Vec3f>::Tile> tiles;
+  tiles.reserve(static_cast<size_t>((tx1 - tx0 + 1) * (ty1 - ty0 + 1)));
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    for (int64_t ty = ty0; ty <= ty1; ++ty)
+      for (int64_t tx = tx0; tx <= tx1; ++tx) tiles.push_back(impl_->tile(level, tx, ty));
+  }
+  int shift = 0;
+  while ((1 << shift) < n) ++shift;  // tile_texels is a power of two (validated)
+  return TextureWindow<cv::Vec3f>((static_cast<double>(i0) + 0.5) * w, (static_cast<double>(j0) + 0.5) * w, w, level,
+                                  static_cast<int>(i1 - i0 + 1), static_cast<int>(j1 - j0 + 1), shift,
+                                  static_cast<int>(i0 - tx0 * n), static_cast<int>(j0 - ty0 * n),
+                                  static_cast<int>(tx1 - tx0 + 1), std::move(tiles));
 }
 
 cv::Vec3f ProceduralSeabedTexture::albedoTexel(int level, double x_m, double y_m) const {

@@ -10,13 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "exocet_common/atomic_file.h"
-#include "exocet_mosaic/ros/dive_bag_writer.h"
-#include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/dive_description.h"
-#include "exocet_mosaic/sim/geo_reference.h"
-#include "exocet_mosaic/sim/image_seabed.h"
 #include "exocet_common/command_line.h"
+#include "exocet_mosaic/ros/synthetic_dive_bag.h"
+#include "exocet_mosaic/sim/dive_description.h"
 
 namespace {
 
@@ -44,12 +40,6 @@ const char kFooter[] =
     "Exit status: 0 done, 2 bad arguments or description (the message names the key and its allowed range),\n"
     "1 I/O failure, 130 interrupted (nothing is left under the output names).";
 
-std::string csvNumber(double v, int precision) {
-  std::ostringstream ss;
-  ss << std::fixed << std::setprecision(precision) << v;
-  return ss.str();
-}
-
 int run(const std::string& config_path, const std::string& output, const std::vector<std::string>& overrides,
         bool print_config, bool quiet) {
   const DiveDescription dive =
@@ -59,69 +49,9 @@ int run(const std::string& config_path, const std::string& output, const std::ve
     return 0;
   }
   if (output.empty()) throw std::invalid_argument("--output FILE.bag is required");
-  if (output.size() < 5 || output.substr(output.size() - 4) != ".bag")
-    throw std::invalid_argument("--output '" + output + "' must end in .bag");
-  const std::string base = output.substr(0, output.size() - 4);
-  const std::string writable = exocet_common::checkWritableDestination(output);
-  if (!writable.empty()) throw std::runtime_error(writable);
-
-  Seabed seabed = makeSeabed(dive.seabed, dive.synthesis.seed);
-  DiveSynthesizer synth(dive.synthesis, seabed.texture.get(), seabed.relief.get());
-  const DiveSynthesisConfig& cfg = dive.synthesis;
-  if (const auto* picture = dynamic_cast<const ImageSeabed*>(seabed.texture.get())) {
-    // A picture ends somewhere: refuse a dive that would film past its edge rather than render filler.
-    for (double t = 0.0; t <= synth.duration_s() + 1e-9; t += 0.5) {
-      if (!picture->covers(synth.footprintOnReferencePlane(t)))
-        throw std::invalid_argument("the camera leaves the seabed image '" + dive.seabed.image +
-                                    "' at t = " + std::to_string(t) +
-                                    " s: enlarge seabed.image_pixel_size_m, move "
-                                    "seabed.image_center_x_m/_y_m or shorten the trajectory");
-    }
-  }
-
-  DiveBagWriter::Options options;
-  options.image_storage = parseImageStorage(dive.image_storage);
-  options.jpeg_quality = dive.jpeg_quality;
-  options.compress_chunks = dive.compress_chunks;
-  DiveBagWriter writer(output, options);
-  writer.writeDatum(cfg.geo, cfg.start_time_unix_s);
-  StaticTransform camera{frames::kBaseLink, frames::kCameraOptical, cfg.rig.baseFromCamera()};
-  StaticTransform altimeter{frames::kBaseLink, frames::kAltimeter, Eigen::Isometry3d::Identity()};
-  altimeter.parent_from_child.linear() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  StaticTransform usbl{frames::kBaseLink, frames::kUsbl, Eigen::Isometry3d::Identity()};
-  writer.writeStaticTransforms({camera, altimeter, usbl}, cfg.start_time_unix_s);
-
-  std::ostringstream truth_csv;
-  truth_csv << "frame,stamp_s,dropped,easting_m,northing_m,up_m,roll_deg,pitch_deg,yaw_deg,cam_easting_m,"
-               "cam_northing_m,cam_up_m,cam_qx,cam_qy,cam_qz,cam_qw,camera_altitude_m,gsd_m,latitude_deg,"
-               "longitude_deg,depth_m\n";
   const auto start = std::chrono::steady_clock::now();
   int last_percent = -1;
-  DiveSink sink;
-  sink.navigation.imu = [&](const ImuRecord& r) { writer.writeImu(r); };
-  sink.navigation.dvl = [&](const DvlRecord& r) { writer.writeDvl(r); };
-  sink.navigation.dead_reckoning = [&](const PoseRecord& r) { writer.writeNavOdometry(r); };
-  sink.navigation.depth = [&](const DepthRecord& r) { writer.writeDepth(r); };
-  sink.navigation.altitude = [&](const AltitudeRecord& r) { writer.writeAltitude(r); };
-  sink.navigation.usbl = [&](const FixRecord& r) { writer.writeUsbl(r); };
-  sink.ground_truth = [&](const PoseRecord& r) { writer.writeGroundTruth(r); };
-  sink.frame = [&](const FrameTruth& f) {
-    if (!f.dropped) writer.writeCameraFrame(f.frame, cfg.rig.camera);
-    writer.writeGroundTruthCamera(f.frame.stamp_s, f.world_from_camera, f.camera_altitude_m);
-    const VehicleState& v = f.vehicle;
-    const Eigen::Vector3d base = synth.toWorld(v.position_m);
-    const Eigen::Vector3d cam = f.world_from_camera.translation();
-    const Eigen::Quaterniond q(f.world_from_camera.rotation());
-    truth_csv << f.frame.index << ',' << csvNumber(f.frame.stamp_s, 6) << ',' << (f.dropped ? 1 : 0) << ','
-              << csvNumber(base.x(), 4) << ',' << csvNumber(base.y(), 4) << ',' << csvNumber(base.z(), 4) << ','
-              << csvNumber(v.roll_rad * 180 / M_PI, 5) << ',' << csvNumber(v.pitch_rad * 180 / M_PI, 5) << ','
-              << csvNumber(v.yaw_rad * 180 / M_PI, 5) << ',' << csvNumber(cam.x(), 4) << ',' << csvNumber(cam.y(), 4)
-              << ',' << csvNumber(cam.z(), 4) << ',' << csvNumber(q.x(), 9) << ',' << csvNumber(q.y(), 9) << ','
-              << csvNumber(q.z(), 9) << ',' << csvNumber(q.w(), 9) << ',' << csvNumber(f.camera_altitude_m, 5) << ','
-              << csvNumber(f.ground_sample_distance_m, 7) << ',' << csvNumber(f.latlon_deg.x(), 9) << ','
-              << csvNumber(f.latlon_deg.y(), 9) << ',' << csvNumber(-base.z(), 4) << '\n';
-  };
-  sink.progress = [&](int done, int total) {
+  const auto progress = [&](int done, int total) {
     if (g_interrupted) throw Interrupted();
     const int percent = 100 * done / total;
     if (!quiet && (percent / 10 != last_percent / 10 || done == total)) {
@@ -131,26 +61,10 @@ int run(const std::string& config_path, const std::string& output, const std::ve
                 << done / std::max(s, 1e-9) << " frames/s\n";
     }
   };
-  synth.run(sink);
-
-  std::ostringstream marks_csv;
-  marks_csv << "id,x_m,y_m,easting_m,northing_m,up_m,latitude_deg,longitude_deg,size_m\n";
-  for (const Landmark& m : synth.renderer().landmarks()) {
-    const Eigen::Vector3d w = synth.toWorld(Eigen::Vector3d(m.x_m, m.y_m, seabed.relief->heightAt_m(m.x_m, m.y_m)));
-    const Eigen::Vector2d ll = gridToLatLon(cfg.geo, w.x(), w.y());
-    marks_csv << m.id << ',' << csvNumber(m.x_m, 4) << ',' << csvNumber(m.y_m, 4) << ',' << csvNumber(w.x(), 4) << ','
-              << csvNumber(w.y(), 4) << ',' << csvNumber(w.z(), 4) << ',' << csvNumber(ll.x(), 9) << ','
-              << csvNumber(ll.y(), 9) << ',' << csvNumber(m.size_m, 3) << '\n';
-  }
-  exocet_common::writeFileAtomically(base + ".ground_truth.csv", truth_csv.str());
-  exocet_common::writeFileAtomically(base + ".landmarks.csv", marks_csv.str());
-  exocet_common::writeFileAtomically(
-      base + ".config.yaml", "# Written by dive_synth: the complete description of " + output +
-                                 "\n# Reproduce with: dive_synth --config THIS_FILE --output OUT.bag\n" + toYaml(dive));
-  writer.commit();
+  const SyntheticDiveSummary written = writeSyntheticDive(dive, output, progress);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::cout << "dive_synth: wrote " << output << " (" << synth.frameCount() << " frames, " << std::setprecision(4)
-            << synth.duration_s() << " s of dive, " << writer.messageCount() << " messages, EPSG:" << cfg.geo.epsg
+  std::cout << "dive_synth: wrote " << output << " (" << written.frames << " frames, " << std::setprecision(4)
+            << written.duration_s << " s of dive, " << written.messages << " messages, EPSG:" << written.epsg
             << ") in " << std::setprecision(3) << s << " s\n";
   return 0;
 }
@@ -214,7 +128,7 @@ int main(int argc, char** argv) {
   shortcut("--encoding", "ENC", key("camera.encoding"), "bgr8 | rgb8 | mono8 | mono16 | bayer_rggb8");
   shortcut("--image-storage", "KIND", key("output.image_storage"),
            "raw | jpeg | png (jpeg/png go to /camera/image_raw/compressed)");
-  shortcut("--threads", "N", key("threads"), "rendering threads (the output does not depend on it)");
+  shortcut("--threads", "N", key("threads"), "frames rendered at once, one per thread (the output does not depend on it)");
   shortcut(
       "--set", "KEY=VALUE", [](const std::string& v) { return std::vector<std::string>{v}; },
       "set any key of the description, e.g. --set trajectory.altitude_m=3.5");

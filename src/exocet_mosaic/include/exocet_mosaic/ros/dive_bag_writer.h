@@ -50,8 +50,16 @@ class DiveBagWriter {
 
   void writeDatum(const sim::GeoReference& datum, double stamp_s);  ///< latched
   void writeStaticTransforms(const std::vector<sim::StaticTransform>& transforms, double stamp_s);  ///< latched
-  /// Image and its camera_info, both stamped at frame.stamp_s.
+  /// Image and its camera_info, both stamped at frame.stamp_s. A compressed storage uses frame.compressed if
+  /// compressFrame() filled it, otherwise compresses the image here.
   void writeCameraFrame(const sim::CameraFrame& frame, const sim::CameraModel& camera);
+  /**
+   * @brief Compresses frame->image as writeCameraFrame() stores it (JPEG or PNG, per the options) into
+   * frame->compressed and frame->compressed_format; does nothing for raw storage. Touches only the frame: call it
+   * on the threads that render, so that compression does not queue on the thread that writes.
+   * Throws std::runtime_error if the image cannot be encoded.
+   */
+  void compressFrame(sim::CameraFrame* frame) const;
   void writeNavOdometry(const sim::PoseRecord& pose);
   void writeDvl(const sim::DvlRecord& dvl);
   void writeImu(const sim::ImuRecord& imu);

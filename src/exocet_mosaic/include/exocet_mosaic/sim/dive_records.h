@@ -9,7 +9,9 @@
  */
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -24,6 +26,10 @@ struct CameraFrame {
   int index = 0;         ///< frame number in the dive, from 0
   cv::Mat image;
   std::string encoding;  ///< sensor_msgs encoding of `image` once written: bgr8, rgb8, mono8, mono16, bayer_rggb8
+  /// `image` already compressed for storage (e.g. JPEG bytes, on the thread that rendered it), with its
+  /// sensor_msgs/CompressedImage format string; empty when not compressed ahead.
+  std::vector<uint8_t> compressed;
+  std::string compressed_format;
 };
 
 /// A pose with velocities and covariance: ground truth or dead-reckoning navigation of base_link.

@@ -49,7 +49,8 @@ struct DiveSynthesisConfig {
   CameraRig rig;
   double ground_truth_rate_hz = 50.0;
   std::vector<Landmark> landmarks;
-  int threads = 1;                          ///< rendering threads (the result does not depend on it)
+  /// Frames rendered at once, each on its own thread (1: in the calling thread). The result does not depend on it.
+  int threads = 1;
 
   std::string validate() const;
 };
@@ -65,11 +66,20 @@ struct FrameTruth {
   Eigen::Vector2d latlon_deg = Eigen::Vector2d::Zero();  ///< camera centre
 };
 
+/**
+ * @brief Where a dive goes. Everything but prepare_frame is called on the thread that runs the dive, in time order.
+ */
 struct DiveSink {
   NavigationSinks navigation;
   std::function<void(const PoseRecord&)> ground_truth;   ///< base_link in UTM at ground_truth_rate_hz
   std::function<void(const FrameTruth&)> frame;
   std::function<void(int frames_done, int frames_total)> progress;
+  /**
+   * Optional work on each frame that is not dropped, right after it is rendered and before `frame` receives it,
+   * e.g. compressing the image. With DiveSynthesisConfig::threads > 1 it runs on the rendering threads, for several
+   * frames at once and out of order: it must touch nothing but the frame it is given.
+   */
+  std::function<void(FrameTruth*)> prepare_frame;
 };
 
 class DiveSynthesizer {
@@ -79,7 +89,11 @@ class DiveSynthesizer {
 
   double duration_s() const { return duration_s_; }
   int frameCount() const;
-  /// Runs the whole dive into the sink.
+  /**
+   * @brief Runs the whole dive into the sink. With config.threads > 1 the frames are rendered ahead on that many
+   * threads (at most 2 * threads frames held at once) and delivered in order: the sink sees the same calls with the
+   * same records as with one thread. An exception from rendering or from the sink stops the dive and propagates.
+   */
   void run(const DiveSink& sink);
 
   const VehicleTrajectory& trajectory() const { return trajectory_; }
@@ -92,6 +106,9 @@ class DiveSynthesizer {
   Eigen::Vector3d toWorld(const Eigen::Vector3d& local) const;
 
  private:
+  /// Frame k's truth and image (none if dropped): a function of k alone, safe to call on several threads at once.
+  FrameTruth renderFrame(int k, bool dropped, const DiveSink& sink) const;
+
   DiveSynthesisConfig config_;
   SeabedRelief* relief_;
   VehicleTrajectory trajectory_;

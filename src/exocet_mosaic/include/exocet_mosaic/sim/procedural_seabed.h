@@ -97,6 +97,8 @@ class ProceduralSeabedTexture final : public SeabedTexture {
   /// Throws std::out_of_range for a level outside [0, maxLevel()], std::invalid_argument for an empty or
   /// non-finite area or a patch above 64 Mtexels.
   TexturePatch<cv::Vec3f> albedoPatch(int level, const WorldRect& area) override;
+  /// The texels of albedoPatch(level, area) left in the cached tiles (no copy); throws as albedoPatch().
+  TextureWindow<cv::Vec3f> albedoWindow(int level, const WorldRect& area) override;
 
   /// Uncached evaluation of the level-`level` texel containing (x_m, y_m): equal bit for bit to the patches.
   cv::Vec3f albedoTexel(int level, double x_m, double y_m) const;

@@ -29,6 +29,12 @@ struct Landmark {
   double size_m = 0.3;          ///< side of the square
 };
 
+/**
+ * @brief Renders frames of the seabed. Every frame is a function of its pose, time and index alone (noise and
+ * marine snow come from streams seeded by the frame and the place, not drawn in sequence), and the renderer keeps no
+ * state between frames: several threads may render different frames at once, provided the texture and relief
+ * allow concurrent calls (the procedural ones and ImageSeabed do).
+ */
 class SeabedRenderer {
  public:
   /**
@@ -45,22 +51,20 @@ class SeabedRenderer {
    * not reach the seabed (camera looking at the horizon).
    */
   cv::Mat renderRadiance(const Eigen::Isometry3d& world_from_camera, double t_s, int frame_index,
-                         cv::Mat* depth_z_m = nullptr);
+                         cv::Mat* depth_z_m = nullptr) const;
 
   /**
    * @brief The camera's image at dive time t: motion blur over the exposure (poses from `pose_at`), camera response,
    * noise and quantisation, in `encoding` (bgr8, rgb8, mono8, mono16, bayer_rggb8).
    */
   cv::Mat render(const std::function<Eigen::Isometry3d(double)>& pose_at, double t_s, int frame_index,
-                 const std::string& encoding);
+                 const std::string& encoding) const;
 
   /// Converts linear radiance to the camera's encoded output with noise (deterministic in seed and frame).
   cv::Mat encode(const cv::Mat& radiance_rgb, int frame_index, const std::string& encoding) const;
 
   const CameraModel& camera() const { return camera_; }
   const std::vector<Landmark>& landmarks() const { return landmarks_; }
-  /// Number of worker threads for rendering (results do not depend on it). Default 1.
-  void setThreads(int threads) { threads_ = threads; }
 
   static bool isSupportedEncoding(const std::string& encoding);
 
@@ -79,7 +83,6 @@ class SeabedRenderer {
   cv::Mat vignette_;      ///< per-pixel vignetting factor, CV_32F
   cv::Mat pixel_angle_;   ///< per-pixel angular size (rad), CV_32F
   std::vector<float> gaussian_table_;  ///< N(0, 1) samples for fast sensor noise
-  int threads_ = 1;
 };
 
 }  // namespace sim
