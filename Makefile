@@ -12,7 +12,7 @@ export CCACHE_BASEDIR := $(CURDIR)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 LAUNCHER := $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=$(CCACHE))
 
-.PHONY: all deps build bags demo test bench format clean
+.PHONY: all deps build bags demo test check bench format clean
 all: build
 
 deps:
@@ -33,6 +33,10 @@ demo: build
 test: build
 	@tools/make-bags.sh sample_out_and_back
 	@tools/run-tests.sh
+
+# The fast tier: every gtest and the build checks' tests (no rostest, no bag); the same closing line.
+check: build
+	@tools/run-tests.sh --gtest-only
 
 bench: build
 	@tools/make-bags.sh sample_out_and_back

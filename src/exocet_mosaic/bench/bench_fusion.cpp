@@ -44,6 +44,7 @@
 #include "exocet_mosaic/sim/navigation_sensors.h"
 #include "exocet_mosaic/sim/vehicle_trajectory.h"
 #include "exocet_common/command_line.h"
+#include "exocet_common/testing/paths.h"
 
 namespace {
 
@@ -663,7 +664,7 @@ std::string filterOverrideError(const std::string& text, std::pair<std::string, 
 
 int main(int argc, char** argv) {
   exocet_common::BenchmarkPaths paths;
-  std::string dive_yaml = std::string(EXOCET_CONFIG_DIR) + "/dives/bench_fusion.yaml";
+  std::string dive_yaml = exocet_common::testing::configDir() + "/dives/bench_fusion.yaml";
   bool no_cross_pass = false;
   int monte_carlo_runs = 50;
   bool mc_exact_camera = false;

@@ -33,6 +33,7 @@
 #include "exocet_common/json_file.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
 #include "exocet_common/command_line.h"
+#include "exocet_common/testing/paths.h"
 #include "shared_data.h"
 
 namespace {
@@ -246,7 +247,7 @@ SequenceScore subset(const SequenceScore& all, const std::function<bool(int)>& s
 
 int main(int argc, char** argv) {
   exocet_common::BenchmarkPaths paths;
-  const std::string config_dir = EXOCET_CONFIG_DIR;
+  const std::string config_dir = exocet_common::testing::configDir();
   int frames_limit = 0;
   std::vector<std::string> part_list = {"accuracy", "peers", "speed"}, method_list;
   CLI::App app(

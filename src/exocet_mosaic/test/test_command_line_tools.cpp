@@ -19,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_common/testing/temp_dir.h"
 
 namespace {
@@ -39,7 +40,7 @@ std::string readText(const std::string& path) {
 
 /// Runs the built `tool` of this package with `args`, capturing its exit code, stdout and stderr.
 RunResult run(const std::string& tool, const std::vector<std::string>& args, const TempDir& scratch) {
-  std::string command = "'" + std::string(EXOCET_TOOLS_DIR) + "/" + tool + "'";
+  std::string command = "'" + exocet_common::testing::executableDir() + "/" + tool + "'";
   for (const auto& a : args) command += " '" + a + "'";
   command += " >'" + scratch.file("stdout") + "' 2>'" + scratch.file("stderr") + "'";
   const int status = std::system(command.c_str());

@@ -35,6 +35,7 @@
 #include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_mosaic/sim/dive_import.h"
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/testing/paths.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::DiveBagWriter;
@@ -43,8 +44,8 @@ namespace topics = exocet_mosaic::topics;
 
 namespace {
 
-const std::string kSparus = std::string(EXOCET_SHARED_DATA_DIR) + "/sparus_auv";
-const std::string kTool = std::string(EXOCET_TOOLS_DIR) + "/dive_import";
+const std::string kSparus = exocet_common::testing::sharedDataDir() + "/sparus_auv";
+const std::string kTool = exocet_common::testing::executableDir() + "/dive_import";
 constexpr int kSparusFrames = 22;
 constexpr int kSparusNavRows = 50;
 

@@ -14,6 +14,7 @@
 
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/testing/paths.h"
 
 using namespace exocet_mosaic::sim;
 
@@ -38,7 +39,7 @@ int runCommand(const std::string& cmd, std::string* err) {
   *err = readFile(err_file);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
-const std::string kSynth = std::string(EXOCET_TOOLS_DIR) + "/dive_synth";
+const std::string kSynth = exocet_common::testing::executableDir() + "/dive_synth";
 
 /// Dive-time standard deviation of a sample.
 double stddev(const std::vector<double>& v) {

@@ -22,6 +22,7 @@
 #include "exocet_mosaic/ros/synthetic_dive_bag.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/ordered_work_pool.h"
+#include "exocet_common/testing/paths.h"
 #include "exocet_common/testing/temp_dir.h"
 
 using namespace exocet_mosaic;
@@ -38,7 +39,7 @@ std::string readFile(const std::string& path) {
 /// The demo dive's look (relief, lamp, turbid water, noise, marine snow, landmarks), cut to a few dozen frames,
 /// with lost frames so that their draws are exercised too.
 DiveDescription shortDive(const std::string& storage, int threads) {
-  return loadDiveDescription(std::string(EXOCET_CONFIG_DIR) + "/dives/sample_lawnmower.yaml",
+  return loadDiveDescription(exocet_common::testing::configDir() + "/dives/sample_lawnmower.yaml",
                              {"duration_s=5.6", "camera.drop_probability=0.1", "output.image_storage=" + storage,
                               "threads=" + std::to_string(threads)});
 }

@@ -18,6 +18,7 @@
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/image_motion_truth.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
+#include "exocet_common/testing/paths.h"
 #include "registration_fixtures.h"
 #include "shared_data.h"
 
@@ -192,11 +193,11 @@ class SimulatedDive : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     // 5 s of the benchmark's dive at video rate, with a turbid second and a dark second moved into it.
-    const sim::DiveDescription dive = sim::loadDiveDescription(
-        std::string(EXOCET_CONFIG_DIR) + "/dives/bench_registration.yaml",
-        {"duration_s=4.99",
-         "imaging.segments=[{start_s: 1.0, end_s: 2.0, turbidity: 3.0, light_gain: 1.0}, "
-         "{start_s: 3.0, end_s: 4.0, turbidity: 1.0, light_gain: 0.3}]"});
+    const sim::DiveDescription dive =
+        sim::loadDiveDescription(exocet_common::testing::configDir() + "/dives/bench_registration.yaml",
+                                 {"duration_s=4.99",
+                                  "imaging.segments=[{start_s: 1.0, end_s: 2.0, turbidity: 3.0, light_gain: 1.0}, "
+                                  "{start_s: 3.0, end_s: 4.0, turbidity: 1.0, light_gain: 0.3}]"});
     dive_ = new sim::RenderedDive(sim::renderDive(dive, 2));
     truth_.assign(dive_->gray.size(), Eigen::Matrix3d::Identity());
     for (size_t i = 1; i < dive_->gray.size(); ++i)
@@ -251,8 +252,8 @@ TEST_F(SimulatedDive, TheSimilarityModelIsLimitedByPerspectiveOnly) {
 
 TEST(SparusFrames, EstimatesAgreeWithSiftRansacWithinOnePixel) {
   // Undistorted with the dataset's intrinsics, as registration_node does with a camera_info.
-  const std::vector<cv::Mat> frames = testing_data::loadSparusFrames(EXOCET_SHARED_DATA_DIR, true);
-  ASSERT_GE(frames.size(), 20u) << "Sparus frames missing under " << EXOCET_SHARED_DATA_DIR;
+  const std::vector<cv::Mat> frames = testing_data::loadSparusFrames(exocet_common::testing::sharedDataDir(), true);
+  ASSERT_GE(frames.size(), 20u) << "Sparus frames missing under " << exocet_common::testing::sharedDataDir();
   for (RegistrationMethod method : {RegistrationMethod::kKlt, RegistrationMethod::kRmr}) {
     std::unique_ptr<FrameRegistrar> r = makeRegistrar(config(method, MotionModel::kHomography));
     double worst = 0.0;

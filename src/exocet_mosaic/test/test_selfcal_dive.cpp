@@ -26,6 +26,7 @@
 #include "exocet_mosaic/sim/camera_model.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
+#include "exocet_common/testing/paths.h"
 #include "test_selfcal_scenes.h"
 
 namespace {
@@ -53,8 +54,8 @@ struct ToolRun {
 
 ToolRun runTool(const std::string& arguments, const fs::path& scratch) {
   const fs::path out = scratch / "tool.out", err = scratch / "tool.err";
-  const std::string command =
-      std::string(EXOCET_TOOLS_DIR) + "/self_calibrate " + arguments + " > " + out.string() + " 2> " + err.string();
+  const std::string command = exocet_common::testing::executableDir() + "/self_calibrate " + arguments + " > " +
+                              out.string() + " 2> " + err.string();
   const int status = std::system(command.c_str());
   ToolRun run;
   run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;

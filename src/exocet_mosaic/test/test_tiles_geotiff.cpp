@@ -31,6 +31,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 
@@ -716,7 +717,8 @@ TEST(TilesGeoTiff, WriteTimeOf4000PxRgbDeflate) {
   std::vector<cv::Mat> frames;
   for (int i = 0;; ++i) {
     std::ostringstream name;
-    name << EXOCET_SHARED_DATA_DIR << "/sparus_auv/frames/frame_" << std::setw(4) << std::setfill('0') << i << ".png";
+    name << exocet_common::testing::sharedDataDir() << "/sparus_auv/frames/frame_" << std::setw(4) << std::setfill('0')
+         << i << ".png";
     if (!fs::exists(name.str())) break;
     frames.push_back(cv::imread(name.str(), cv::IMREAD_COLOR));
   }

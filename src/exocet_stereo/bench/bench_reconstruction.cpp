@@ -27,6 +27,7 @@
 
 #include "exocet_common/json_file.h"
 #include "exocet_common/command_line.h"
+#include "exocet_common/testing/paths.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
 #include "exocet_stereo/dense/dense_stereo.h"
@@ -445,7 +446,7 @@ bool writeFigures(const std::string& json_path, const nlohmann::ordered_json& js
 
 int main(int argc, char** argv) {
   exocet_common::BenchmarkPaths paths;
-  paths.shared_data = EXOCET_SHARED_DATA_DIR;
+  paths.shared_data = exocet_common::testing::sharedDataDir();
   std::string only = "all";
   CLI::App app(
       "bench_reconstruction: the stereo rig calibration against OpenCV's stored result, the temple ring\n"

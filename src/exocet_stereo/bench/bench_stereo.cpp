@@ -18,6 +18,7 @@
 
 #include "exocet_common/json_file.h"
 #include "exocet_common/command_line.h"
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
 
@@ -43,7 +44,7 @@ bool hasFractionalDisparity(const cv::Mat& ground_truth_px) {
 int main(int argc, char** argv) {
   using namespace exocet_stereo::dense;
   exocet_common::BenchmarkPaths paths;
-  paths.shared_data = EXOCET_SHARED_DATA_DIR;
+  paths.shared_data = exocet_common::testing::sharedDataDir();
   std::vector<std::string> methods = {"ssd", "dp", "so", "sgm", "gc", "bd", "sgbm", "pm"};
   std::vector<std::string> scenes = {"tsukuba", "venus", "teddy", "cones"};
   int repeat = 3;   // timing: best of N runs for the fast methods (one run when a run exceeds a second)

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/dense/evaluation.h"
 #include "exocet_stereo/io/pfm.h"
 
@@ -18,7 +19,7 @@ namespace {
 
 using namespace exocet_stereo;
 
-const std::string kData = std::string(EXOCET_SHARED_DATA_DIR) + "/middlebury_stereo/";
+const std::string kData = exocet_common::testing::sharedDataDir() + "/middlebury_stereo/";
 
 // Half a unit of the last printed digit: "2.09" -> 0.005, "15.0" -> 0.05.
 double printedTolerance(const std::string& text) {
@@ -107,7 +108,7 @@ TEST(Pfm, RejectsBadFilesAndTypes) {
 }
 
 TEST(EvaluateDisparityTool, PrintsRatesOfThePatchMatchResult) {
-  const std::string command = std::string(EXOCET_TOOLS_DIR) + "/evaluate_disparity --disparity " + kData +
+  const std::string command = exocet_common::testing::executableDir() + "/evaluate_disparity --disparity " + kData +
                               "venus/alg117_patchmatch_result.png --scene " + kData + "venus 2>/dev/null";
   FILE* pipe = popen(command.c_str(), "r");
   ASSERT_NE(pipe, nullptr);
@@ -116,7 +117,8 @@ TEST(EvaluateDisparityTool, PrintsRatesOfThePatchMatchResult) {
   while (fgets(buffer, sizeof(buffer), pipe)) output += buffer;
   EXPECT_EQ(pclose(pipe), 0);
   EXPECT_NE(output.find("nonocc 0.21 %"), std::string::npos) << output;
-  const std::string bad = std::string(EXOCET_TOOLS_DIR) + "/evaluate_disparity --disparity x.pfm >/dev/null 2>&1";
+  const std::string bad =
+      exocet_common::testing::executableDir() + "/evaluate_disparity --disparity x.pfm >/dev/null 2>&1";
   const int status = std::system(bad.c_str());
   EXPECT_EQ(WEXITSTATUS(status), 2);
 }

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
 
@@ -13,7 +14,8 @@ namespace {
 using namespace exocet_stereo::dense;
 
 TEST(GraphCutStereo, TsukubaAtMostTwoPercentBadNonOccluded) {
-  const MiddleburyScene scene = loadMiddleburyScene(std::string(EXOCET_SHARED_DATA_DIR) + "/middlebury_stereo/tsukuba");
+  const MiddleburyScene scene =
+      loadMiddleburyScene(exocet_common::testing::sharedDataDir() + "/middlebury_stereo/tsukuba");
   DenseStereoConfig config = defaultConfigFor("gc", scene.max_disparity_px);
   config.subpixel = false;  // as in the benchmark: Tsukuba's ground truth is integer
   const cv::Mat disparity = createDenseStereo("gc", config)->compute(scene.left, scene.right);

@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
 #include "exocet_stereo/dense/post_processing.h"
@@ -21,7 +22,7 @@ namespace {
 
 using namespace exocet_stereo::dense;
 
-const std::string kData = std::string(EXOCET_SHARED_DATA_DIR) + "/middlebury_stereo/";
+const std::string kData = exocet_common::testing::sharedDataDir() + "/middlebury_stereo/";
 
 // A random-dot stereo pair whose left disparity is d(x, y) = a + b x + c y (a plane; b = c = 0: constant).
 struct SyntheticPair {
@@ -201,7 +202,7 @@ TEST(DenseStereoTool, WritesPfmAndExitsTwoOnBadInput) {
   const std::string dir = testing::TempDir();
   ASSERT_TRUE(cv::imwrite(dir + "/dots_left.png", pair.left));
   ASSERT_TRUE(cv::imwrite(dir + "/dots_right.png", pair.right));
-  const std::string tool = std::string(EXOCET_TOOLS_DIR) + "/dense_stereo";
+  const std::string tool = exocet_common::testing::executableDir() + "/dense_stereo";
   const std::string common = " --left " + dir + "/dots_left.png --right " + dir + "/dots_right.png";
   auto run = [](const std::string& command) {
     return WEXITSTATUS(std::system((command + " >/dev/null 2>&1").c_str()));

@@ -15,6 +15,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/dense/dense_stereo.h"
 #include "exocet_stereo/dense/evaluation.h"
 #include "exocet_stereo/dense/patchmatch_stereo.h"
@@ -24,7 +25,7 @@ namespace {
 
 using namespace exocet_stereo::dense;
 
-const std::string kData = std::string(EXOCET_SHARED_DATA_DIR) + "/middlebury_stereo/";
+const std::string kData = exocet_common::testing::sharedDataDir() + "/middlebury_stereo/";
 
 struct SyntheticPair {
   cv::Mat left, right, disparity;

@@ -11,6 +11,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/geometry/bundle_adjustment.h"
 #include "exocet_stereo/geometry/epipolar.h"
 #include "exocet_stereo/geometry/pose_perturbation.h"
@@ -21,7 +22,7 @@ namespace {
 
 using namespace exocet_stereo::geometry;
 
-const std::string kTempleDir = std::string(EXOCET_SHARED_DATA_DIR) + "/temple_sparse_ring";
+const std::string kTempleDir = exocet_common::testing::sharedDataDir() + "/temple_sparse_ring";
 // Centre of the tight bounding box given in the data set's README.txt.
 const Eigen::Vector3d kTempleCentre(0.5 * (-0.073568 + 0.028855), 0.5 * (0.021728 + 0.181892),
                                     0.5 * (-0.012445 + 0.062736));

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/geometry/chessboard_detection.h"
 #include "exocet_stereo/geometry/rig_calibration.h"
 #include "exocet_stereo/geometry/stereo_rig.h"
@@ -21,7 +22,7 @@ namespace {
 
 using namespace exocet_stereo::geometry;
 
-const std::string kDir = std::string(EXOCET_SHARED_DATA_DIR) + "/stereo_chessboard";
+const std::string kDir = exocet_common::testing::sharedDataDir() + "/stereo_chessboard";
 
 void pairPaths(std::vector<std::string>& left, std::vector<std::string>& right) {
   for (int i = 1; i <= 14; ++i) {
@@ -112,14 +113,14 @@ TEST_F(RigCalibrationTest, YamlRoundTripKeepsEveryField) {
 // The calibration tool writes the same rig from the command line (--folder form).
 TEST_F(RigCalibrationTest, ToolWritesRig) {
   const std::string out = (std::filesystem::temp_directory_path() / "exocet_test_tool_rig.yaml").string();
-  const std::string command = std::string(EXOCET_TOOLS_DIR) + "/calibrate_stereo_rig --folder " + kDir +
+  const std::string command = exocet_common::testing::executableDir() + "/calibrate_stereo_rig --folder " + kDir +
                               " --pattern 9x6 --square-mm 25 --output " + out + " > /dev/null";
   ASSERT_EQ(std::system(command.c_str()), 0) << command;
   const StereoRig written = readStereoRig(out);
   std::filesystem::remove(out);
   EXPECT_EQ(written.pairs_used, 13);
   EXPECT_NEAR(written.baseline_m, rig_->baseline_m, 1e-6);
-  const std::string bad = std::string(EXOCET_TOOLS_DIR) + "/calibrate_stereo_rig --folder " + kDir +
+  const std::string bad = exocet_common::testing::executableDir() + "/calibrate_stereo_rig --folder " + kDir +
                           " --pattern 9by6 --output " + out + " 2> /dev/null";
   const int status = std::system(bad.c_str());
   EXPECT_EQ(WEXITSTATUS(status), 2) << "bad input";

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/geometry/chessboard_detection.h"
 #include "exocet_stereo/geometry/rig_calibration.h"
 #include "exocet_stereo/geometry/stereo_rectification.h"
@@ -17,7 +18,7 @@ namespace {
 
 using namespace exocet_stereo::geometry;
 
-const std::string kDir = std::string(EXOCET_SHARED_DATA_DIR) + "/stereo_chessboard";
+const std::string kDir = exocet_common::testing::sharedDataDir() + "/stereo_chessboard";
 
 std::vector<int> pairNumbers() { return {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14}; }
 

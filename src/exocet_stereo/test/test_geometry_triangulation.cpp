@@ -12,6 +12,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "exocet_common/testing/paths.h"
 #include "exocet_stereo/geometry/epipolar.h"
 #include "exocet_stereo/geometry/feature_matching.h"
 #include "exocet_stereo/geometry/fundamental_ransac.h"
@@ -21,7 +22,7 @@ namespace {
 
 using namespace exocet_stereo::geometry;
 
-const std::string kTempleDir = std::string(EXOCET_SHARED_DATA_DIR) + "/temple_sparse_ring";
+const std::string kTempleDir = exocet_common::testing::sharedDataDir() + "/temple_sparse_ring";
 
 std::vector<PinholeView> threeViews() {
   std::vector<PinholeView> views(3);

@@ -1,0 +1,4 @@
+#include <vendor/clock.h>
+namespace fixture {
+double vendorSeconds() { return vendor::seconds(); }
+}
