@@ -34,7 +34,7 @@
 #include "exocet_mosaic/fusion/metric_motion.h"
 #include "exocet_mosaic/fusion/navigation_filter.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
-#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/registration/motion_model.h"
 #include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/sequence_registrar.h"
@@ -61,10 +61,10 @@ struct CapturedDive {
   std::vector<Eigen::Isometry3d> world_from_camera;  ///< truth, UTM frame
   std::vector<double> gsd_m;                         ///< truth: ground sample distance
   std::vector<double> vehicle_yaw_rad;               ///< truth: ENU yaw of the vehicle
-  std::vector<sim::ImuRecord> imu;
-  std::vector<sim::AltitudeRecord> altitude;
-  std::vector<sim::PoseRecord> dead_reckoning;
-  std::vector<sim::FixRecord> usbl;
+  std::vector<dive::ImuRecord> imu;
+  std::vector<dive::AltitudeRecord> altitude;
+  std::vector<dive::PoseRecord> dead_reckoning;
+  std::vector<dive::FixRecord> usbl;
 };
 
 constexpr uint64_t kCacheMagic = 0x3245564944535546ULL;  // "FUSDIVE2" (DR carried with the accelerometers)
@@ -163,10 +163,10 @@ CapturedDive simulate(const sim::DiveDescription& dive, const std::string& cache
   sim::Seabed seabed = sim::makeSeabed(dive.seabed, config.seed);
   sim::DiveSynthesizer synth(config, seabed.texture.get(), seabed.relief.get());
   sim::DiveSink sink;
-  sink.navigation.imu = [&](const sim::ImuRecord& r) { d.imu.push_back(r); };
-  sink.navigation.altitude = [&](const sim::AltitudeRecord& r) { d.altitude.push_back(r); };
-  sink.navigation.dead_reckoning = [&](const sim::PoseRecord& r) { d.dead_reckoning.push_back(r); };
-  sink.navigation.usbl = [&](const sim::FixRecord& r) { d.usbl.push_back(r); };
+  sink.navigation.imu = [&](const dive::ImuRecord& r) { d.imu.push_back(r); };
+  sink.navigation.altitude = [&](const dive::AltitudeRecord& r) { d.altitude.push_back(r); };
+  sink.navigation.dead_reckoning = [&](const dive::PoseRecord& r) { d.dead_reckoning.push_back(r); };
+  sink.navigation.usbl = [&](const dive::FixRecord& r) { d.usbl.push_back(r); };
   sink.frame = [&](const sim::FrameTruth& t) {
     if (t.dropped) return;
     cv::Mat gray;
@@ -198,9 +198,9 @@ CapturedDive simulate(const sim::DiveDescription& dive, const std::string& cache
 
 // ---- Navigation records at a stamp --------------------------------------------------------------------------------
 
-Eigen::Quaterniond attitudeAt(const std::vector<sim::ImuRecord>& imu, double stamp_s) {
+Eigen::Quaterniond attitudeAt(const std::vector<dive::ImuRecord>& imu, double stamp_s) {
   auto it = std::lower_bound(imu.begin(), imu.end(), stamp_s,
-                             [](const sim::ImuRecord& r, double t) { return r.stamp_s < t; });
+                             [](const dive::ImuRecord& r, double t) { return r.stamp_s < t; });
   if (it == imu.end()) return imu.back().orientation;
   if (it == imu.begin() || it->stamp_s == stamp_s) return it->orientation;
   const auto prev = it - 1;
@@ -336,7 +336,7 @@ struct NavEvent {
 
 /// Every input of one realisation of the sensors, in arrival order. The image motion of frame k arrives once its
 /// view's window has passed (plus the registration's time).
-std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& grid) {
+std::vector<NavEvent> buildEvents(const CapturedDive& d, const exocet_common::UtmGrid& grid) {
   std::vector<NavEvent> events;
   const double t0 = d.frame_stamps_s.front();
   const double image_latency_s = kViewHalfWindow_s + 0.03;
@@ -348,14 +348,14 @@ std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& 
     e.frame = static_cast<int>(k);
     events.push_back(e);
   }
-  for (const sim::ImuRecord& r : d.imu) {
+  for (const dive::ImuRecord& r : d.imu) {
     NavEvent e;
     e.kind = NavEvent::kAttitude;
     e.stamp_s = e.arrival_s = r.stamp_s;
     e.orientation = r.orientation;
     events.push_back(e);
   }
-  for (const sim::AltitudeRecord& r : d.altitude) {
+  for (const dive::AltitudeRecord& r : d.altitude) {
     if (!std::isfinite(r.range_m) || r.range_m <= 0.0) continue;  // fusion_node rejects these
     NavEvent e;
     e.kind = NavEvent::kAltitude;
@@ -363,7 +363,7 @@ std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& 
     e.range_m = r.range_m;
     events.push_back(e);
   }
-  for (const sim::PoseRecord& r : d.dead_reckoning) {
+  for (const dive::PoseRecord& r : d.dead_reckoning) {
     if (r.stamp_s < t0) continue;
     NavEvent e;
     e.kind = NavEvent::kDeadReckoning;
@@ -373,7 +373,7 @@ std::vector<NavEvent> buildEvents(const CapturedDive& d, const fusion::UtmGrid& 
     e.covariance = r.pose_covariance.block<2, 2>(0, 0);
     events.push_back(e);
   }
-  for (const sim::FixRecord& f : d.usbl) {
+  for (const dive::FixRecord& f : d.usbl) {
     if (f.stamp_s <= t0) continue;
     NavEvent e;
     e.kind = NavEvent::kFix;
@@ -713,7 +713,7 @@ int main(int argc, char** argv) {
   const sim::CameraRig& rig = dive.synthesis.rig;
   const CapturedDive d = simulate(dive, out_dir + "/cache", 2);
   const size_t n = d.gray.size();
-  const fusion::UtmGrid grid = fusion::UtmGrid::forLatLon(dive.origin_latitude_deg, dive.origin_longitude_deg);
+  const exocet_common::UtmGrid grid = exocet_common::UtmGrid::forLatLon(dive.origin_latitude_deg, dive.origin_longitude_deg);
   std::vector<Eigen::Vector2d> truth(n);
   for (size_t k = 0; k < n; ++k) truth[k] = d.world_from_camera[k].translation().head<2>();
   const double t0 = d.frame_stamps_s.front();
@@ -949,10 +949,10 @@ int main(int argc, char** argv) {
                                              sc.seed + 7919 * (run + 1),
                                              [relief](double x, double y) { return relief->heightAt_m(x, y); });
       sim::NavigationSinks sinks;
-      sinks.imu = [&](const sim::ImuRecord& x) { r.imu.push_back(x); };
-      sinks.altitude = [&](const sim::AltitudeRecord& x) { r.altitude.push_back(x); };
-      sinks.dead_reckoning = [&](const sim::PoseRecord& x) { r.dead_reckoning.push_back(x); };
-      sinks.usbl = [&](const sim::FixRecord& x) { r.usbl.push_back(x); };
+      sinks.imu = [&](const dive::ImuRecord& x) { r.imu.push_back(x); };
+      sinks.altitude = [&](const dive::AltitudeRecord& x) { r.altitude.push_back(x); };
+      sinks.dead_reckoning = [&](const dive::PoseRecord& x) { r.dead_reckoning.push_back(x); };
+      sinks.usbl = [&](const dive::FixRecord& x) { r.usbl.push_back(x); };
       sensors.advanceTo(trajectory, duration_s, sinks);
       // The pixel size's prior stands for the camera's calibration (alpha known to that relative sigma, e.g. from
       // self-calibration): each run converts with a focal length drawn from it, as the truth of a consistent test

@@ -13,7 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "exocet_mosaic/registration/image_undistorter.h"
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 
 namespace exocet_mosaic {
 namespace testing_data {
@@ -33,7 +33,7 @@ inline std::vector<cv::Mat> loadSparusFrames(const std::string& shared_data_dir,
     frames.push_back(cv::imread(name.str(), cv::IMREAD_GRAYSCALE));
   }
   if (!undistort || frames.empty()) return frames;
-  const sim::CameraModel camera = sim::loadCameraModelYaml(folder + "/camera_intrinsics.yaml");
+  const exocet_common::CameraModel camera = exocet_common::loadCameraModelYaml(folder + "/camera_intrinsics.yaml");
   const registration::ImageUndistorter undistorter(
       cv::Size(camera.width, camera.height), {camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0},
       camera.distortion);

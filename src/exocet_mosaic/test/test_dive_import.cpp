@@ -33,13 +33,13 @@
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/ros/dive_bag_writer.h"
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/dive_import.h"
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_mosaic/dive/dive_import.h"
+#include "exocet_common/geo_reference.h"
 #include "exocet_common/testing/paths.h"
 
 namespace fs = std::filesystem;
 using exocet_mosaic::DiveBagWriter;
-namespace sim = exocet_mosaic::sim;
+namespace dive = exocet_mosaic::dive;
 namespace topics = exocet_mosaic::topics;
 
 namespace {
@@ -229,27 +229,27 @@ void expectSparusBag(const std::string& path) {
 }
 
 /// Records what writeDiveImport writes, for tests that need no bag.
-class RecordingSink : public sim::DiveRecordSink {
+class RecordingSink : public dive::DiveRecordSink {
  public:
-  void writeDatum(const sim::GeoReference& d, double) override { datum = d; }
-  void writeStaticTransforms(const std::vector<sim::StaticTransform>& t, double) override { transforms = t; }
-  void writeCameraFrame(const sim::CameraFrame& f, const sim::CameraModel&) override {
+  void writeDatum(const exocet_common::GeoReference& d, double) override { datum = d; }
+  void writeStaticTransforms(const std::vector<dive::StaticTransform>& t, double) override { transforms = t; }
+  void writeCameraFrame(const dive::CameraFrame& f, const exocet_common::CameraModel&) override {
     frames.push_back(f);
     stamps_s.push_back(f.stamp_s);
   }
-  void writeNavOdometry(const sim::PoseRecord& p) override {
+  void writeNavOdometry(const dive::PoseRecord& p) override {
     poses.push_back(p);
     stamps_s.push_back(p.stamp_s);
   }
-  void writeDepth(const sim::DepthRecord& d) override { depths.push_back(d); }
-  void writeAltitude(const sim::AltitudeRecord& a) override { altitudes.push_back(a); }
+  void writeDepth(const dive::DepthRecord& d) override { depths.push_back(d); }
+  void writeAltitude(const dive::AltitudeRecord& a) override { altitudes.push_back(a); }
 
-  std::optional<sim::GeoReference> datum;
-  std::vector<sim::StaticTransform> transforms;
-  std::vector<sim::CameraFrame> frames;
-  std::vector<sim::PoseRecord> poses;
-  std::vector<sim::DepthRecord> depths;
-  std::vector<sim::AltitudeRecord> altitudes;
+  std::optional<exocet_common::GeoReference> datum;
+  std::vector<dive::StaticTransform> transforms;
+  std::vector<dive::CameraFrame> frames;
+  std::vector<dive::PoseRecord> poses;
+  std::vector<dive::DepthRecord> depths;
+  std::vector<dive::AltitudeRecord> altitudes;
   std::vector<double> stamps_s;
 };
 
@@ -265,11 +265,11 @@ void writeNoiseImages(const std::string& folder, int count = 3) {
 
 /// Expects `action` to throw a DiveImportError of `kind` whose message contains every one of `parts`.
 template <typename F>
-void expectImportError(F action, sim::DiveImportError::Kind kind, const std::vector<std::string>& parts) {
+void expectImportError(F action, dive::DiveImportError::Kind kind, const std::vector<std::string>& parts) {
   try {
     action();
     ADD_FAILURE() << "no error; expected one mentioning " << parts.front();
-  } catch (const sim::DiveImportError& e) {
+  } catch (const dive::DiveImportError& e) {
     EXPECT_EQ(e.kind(), kind) << e.what();
     for (const auto& p : parts) EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << e.what();
   }
@@ -282,8 +282,8 @@ std::vector<std::string> replaceArg(std::vector<std::string> args, const std::st
   return args;
 }
 
-sim::DiveImport prepare(const std::vector<std::string>& args) {
-  return sim::prepareDiveImport(sim::parseDiveImportArguments(args));
+dive::DiveImport prepare(const std::vector<std::string>& args) {
+  return dive::prepareDiveImport(dive::parseDiveImportArguments(args));
 }
 
 // ------------------------------------------------------------------------------------------------------------
@@ -291,18 +291,18 @@ sim::DiveImport prepare(const std::vector<std::string>& args) {
 TEST(DiveImportSparus, LibraryRoundTripIsExact) {
   TempDir dir;
   const std::string output = dir / "sparus.bag";
-  const sim::DiveImport dive = prepare(sparusArgs(output));
+  const dive::DiveImport dive = prepare(sparusArgs(output));
   EXPECT_EQ(dive.navigation.world_frame, "map");
   EXPECT_EQ(dive.navigation.time_column, "ts");
   EXPECT_EQ(dive.navigation.orientation_columns, "qx,qy,qz,qw");
   EXPECT_EQ(dive.navigation.ignored_columns, (std::vector<std::string>{"source", "target"}));
   DiveBagWriter::Options options;
   options.world_frame = dive.navigation.world_frame;
-  sim::DiveImportSummary summary;
+  dive::DiveImportSummary summary;
   {
     DiveBagWriter writer(output, options);
-    sim::DiveRecordSinkFor<DiveBagWriter> sink(&writer);
-    summary = sim::writeDiveImport(dive, &sink);
+    dive::DiveRecordSinkFor<DiveBagWriter> sink(&writer);
+    summary = dive::writeDiveImport(dive, &sink);
     writer.commit();
   }
   EXPECT_EQ(summary.frames, kSparusFrames);
@@ -338,7 +338,7 @@ TEST(DiveImportSparus, VideoTimedByStartAndContainerFps) {
   // The container says 4.998803534754 fps (SOURCE.txt rounds it to 4.9988): consecutive frames are 1/4.9988 s
   // apart to within 1 us, and frame k is at start + k / container fps. frames_index.csv was made with the rounded
   // 4.9988, so it drifts from the container's timing by up to 3 us at frame 21.
-  const double fps = sim::listImages(kSparus + "/sparus_snippet.mp4").container_fps;
+  const double fps = dive::listImages(kSparus + "/sparus_snippet.mp4").container_fps;
   EXPECT_NEAR(fps, 4.9988, 1e-4);
   const auto index = readCsvRows(kSparus + "/frames_index.csv");
   for (int k = 0; k < kSparusFrames; ++k) {
@@ -363,9 +363,9 @@ TEST(DiveImportSparus, Mono8AndCameraPose) {
   TempDir dir;
   std::vector<std::string> args = sparusArgs(dir / "unused.bag");
   args.insert(args.end(), {"--encoding", "mono8", "--camera-pose", "0.1,-0.2,0.3,180,0,-90"});
-  const sim::DiveImport dive = prepare(args);
+  const dive::DiveImport dive = prepare(args);
   RecordingSink sink;
-  sim::writeDiveImport(dive, &sink);
+  dive::writeDiveImport(dive, &sink);
   ASSERT_EQ(sink.frames.size(), static_cast<size_t>(kSparusFrames));
   cv::Mat gray;
   cv::cvtColor(cv::imread(kSparus + "/frames/frame_0005.png", cv::IMREAD_COLOR), gray, cv::COLOR_BGR2GRAY);
@@ -395,7 +395,7 @@ TEST(DiveImportNavigation, GeodeticRowsGiveUtmWithGridHeading) {
             "1000.5,45.0,5.0,13.0,0,0,0,\n"
             "1001.0,45.0,3.0,13.0,90,10,0,4\n"
             "1001.5,45.0,3.0,13.0,90,0,10,4\n");
-  const sim::NavigationTable nav = sim::readNavigationCsv(dir / "nav.csv", std::nullopt);
+  const dive::NavigationTable nav = dive::readNavigationCsv(dir / "nav.csv", std::nullopt);
   ASSERT_EQ(nav.world_frame, "utm");
   ASSERT_TRUE(nav.datum);
   EXPECT_EQ(nav.datum->utm_zone, 31);
@@ -403,7 +403,7 @@ TEST(DiveImportNavigation, GeodeticRowsGiveUtmWithGridHeading) {
   EXPECT_EQ(nav.position_columns, "lat,lon,depth");
   ASSERT_EQ(nav.rows.size(), 4u);
   EXPECT_EQ(nav.rows[0].line, 3);
-  const Eigen::Vector2d grid = sim::latLonToGrid(*nav.datum, 45.0, 5.0);
+  const Eigen::Vector2d grid = exocet_common::latLonToGrid(*nav.datum, 45.0, 5.0);
   EXPECT_NEAR(nav.rows[1].pose.position_m.x(), grid.x(), 1e-6);
   EXPECT_NEAR(nav.rows[1].pose.position_m.y(), grid.y(), 1e-6);
   EXPECT_NEAR(nav.rows[1].pose.position_m.z(), -13.0, 1e-12);
@@ -428,12 +428,12 @@ TEST(DiveImportNavigation, GeodeticRowsGiveUtmWithGridHeading) {
 TEST(DiveImportNavigation, LocalOffsetsWithOriginAndYaw) {
   TempDir dir;
   writeText(dir / "nav.csv", "t_unix_s,x,y,z,yaw_deg,altitude\n10,1.5,-2.0,-20,30,2\n11,2.5,-2.0,-20,30,60\n");
-  sim::GeoOrigin origin;
+  dive::GeoOrigin origin;
   origin.latitude_deg = 42.0;
   origin.longitude_deg = 3.1;
-  const sim::NavigationTable nav = sim::readNavigationCsv(dir / "nav.csv", origin);
+  const dive::NavigationTable nav = dive::readNavigationCsv(dir / "nav.csv", origin);
   ASSERT_EQ(nav.world_frame, "utm");
-  const sim::GeoReference ref = sim::makeGeoReference(42.0, 3.1);
+  const exocet_common::GeoReference ref = exocet_common::makeGeoReference(42.0, 3.1);
   EXPECT_NEAR(nav.rows[0].pose.position_m.x(), ref.origin_easting_m + 1.5, 1e-6);
   EXPECT_NEAR(nav.rows[0].pose.position_m.y(), ref.origin_northing_m - 2.0, 1e-6);
   EXPECT_NEAR(nav.rows[0].depth->depth_m, 20.0, 1e-12);
@@ -442,7 +442,7 @@ TEST(DiveImportNavigation, LocalOffsetsWithOriginAndYaw) {
   // Every altitude lies inside the Range message's span.
   EXPECT_GE(nav.rows[1].altitude->max_range_m, 60.0);
   // Without an origin, the same file is local.
-  const sim::NavigationTable local = sim::readNavigationCsv(dir / "nav.csv", std::nullopt);
+  const dive::NavigationTable local = dive::readNavigationCsv(dir / "nav.csv", std::nullopt);
   EXPECT_EQ(local.world_frame, "map");
   EXPECT_FALSE(local.datum);
   EXPECT_EQ(local.rows[0].pose.position_m, Eigen::Vector3d(1.5, -2.0, -20));
@@ -451,7 +451,7 @@ TEST(DiveImportNavigation, LocalOffsetsWithOriginAndYaw) {
 TEST(DiveImportNavigation, WithoutOrientationMarksItUnknown) {
   TempDir dir;
   writeText(dir / "nav.csv", "stamp,x,y,depth\r\n1,0,0,5\r\n2,1,0,\"5.5\"\r\n");
-  const sim::NavigationTable nav = sim::readNavigationCsv(dir / "nav.csv", std::nullopt);
+  const dive::NavigationTable nav = dive::readNavigationCsv(dir / "nav.csv", std::nullopt);
   EXPECT_EQ(nav.orientation_columns, "none");
   ASSERT_EQ(nav.rows.size(), 2u);
   EXPECT_EQ(nav.rows[0].pose.pose_covariance(5, 5), -1.0);
@@ -462,23 +462,23 @@ TEST(DiveImportNavigation, WithoutOrientationMarksItUnknown) {
 TEST(DiveImportFrames, IndexByFrameNumberAndRate) {
   TempDir dir;
   writeNoiseImages(dir / "images");
-  const sim::ImageSource images = sim::listImages(dir / "images");
+  const dive::ImageSource images = dive::listImages(dir / "images");
   ASSERT_EQ(images.files.size(), 3u);
   writeText(dir / "index.csv", "frame,t\n0,100.0\n1,100.25\n2,100.5\n7,101\n");
-  const sim::FrameTimes times = sim::frameTimesFromIndex(images, dir / "index.csv");
+  const dive::FrameTimes times = dive::frameTimesFromIndex(images, dir / "index.csv");
   EXPECT_EQ(times.stamps_s, (std::vector<double>{100.0, 100.25, 100.5}));
   EXPECT_EQ(times.unused_index_rows, 1);
-  const sim::FrameTimes rate = sim::frameTimesFromRate(images, 50.0, 4.0);
+  const dive::FrameTimes rate = dive::frameTimesFromRate(images, 50.0, 4.0);
   EXPECT_EQ(rate.stamps_s, (std::vector<double>{50.0, 50.25, 50.5}));
   // Frame times must increase.
   writeText(dir / "bad_index.csv", "file,t\nimg_0.png,100\nimg_1.png,99\nimg_2.png,101\n");
-  expectImportError([&] { sim::frameTimesFromIndex(images, dir / "bad_index.csv"); },
-                    sim::DiveImportError::Kind::kInput, {"line 3", "img_1.png", "must increase"});
+  expectImportError([&] { dive::frameTimesFromIndex(images, dir / "bad_index.csv"); },
+                    dive::DiveImportError::Kind::kInput, {"line 3", "img_1.png", "must increase"});
   // Every image needs a time.
   writeText(dir / "short_index.csv", "file,t\nimg_0.png,100\nimg_2.png,101\n");
-  expectImportError([&] { sim::frameTimesFromIndex(images, dir / "short_index.csv"); },
-                    sim::DiveImportError::Kind::kInput, {"img_1.png", "has no row"});
-  expectImportError([&] { sim::frameTimesFromRate(images, 50.0, 0.0); }, sim::DiveImportError::Kind::kInput, {"--fps"});
+  expectImportError([&] { dive::frameTimesFromIndex(images, dir / "short_index.csv"); },
+                    dive::DiveImportError::Kind::kInput, {"img_1.png", "has no row"});
+  expectImportError([&] { dive::frameTimesFromRate(images, 50.0, 0.0); }, dive::DiveImportError::Kind::kInput, {"--fps"});
 }
 
 // ------------------------------------------------------------------------------------------------------------
@@ -517,7 +517,7 @@ class DiveImportErrors : public ::testing::Test {
 
 TEST_F(DiveImportErrors, MissingImagesFolder) {
   const auto args = replaceArg(args_, "--images", dir_ / "no_such_folder");
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"--images", "does not exist"});
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput, {"--images", "does not exist"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("--images: '" + dir_ / "no_such_folder" + "' does not exist"), std::string::npos) << run.err;
@@ -526,19 +526,19 @@ TEST_F(DiveImportErrors, MissingImagesFolder) {
 
 TEST_F(DiveImportErrors, MissingOrUnreadableNav) {
   const auto missing = replaceArg(args_, "--nav", dir_ / "no_such.csv");
-  expectImportError([&] { prepare(missing); }, sim::DiveImportError::Kind::kInput, {"--nav", "does not exist"});
+  expectImportError([&] { prepare(missing); }, dive::DiveImportError::Kind::kInput, {"--nav", "does not exist"});
   const RunResult run = runTool(missing, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("no_such.csv"), std::string::npos) << run.err;
   // A folder where the CSV should be cannot be read as one.
-  expectImportError([&] { prepare(replaceArg(args_, "--nav", dir_.path())); }, sim::DiveImportError::Kind::kInput,
+  expectImportError([&] { prepare(replaceArg(args_, "--nav", dir_.path())); }, dive::DiveImportError::Kind::kInput,
                     {"--nav", "is a folder"});
   writeText(dir_ / "empty.csv", "");
   expectImportError([&] { prepare(replaceArg(args_, "--nav", dir_ / "empty.csv")); },
-                    sim::DiveImportError::Kind::kInput, {"--nav", "empty"});
+                    dive::DiveImportError::Kind::kInput, {"--nav", "empty"});
   writeText(dir_ / "no_time.csv", "x,y,z\n1,2,3\n");
   expectImportError([&] { prepare(replaceArg(args_, "--nav", dir_ / "no_time.csv")); },
-                    sim::DiveImportError::Kind::kInput, {"no time column", "t_unix_s, t, time, stamp, ts"});
+                    dive::DiveImportError::Kind::kInput, {"no time column", "t_unix_s, t, time, stamp, ts"});
   expectNoOutput();
 }
 
@@ -546,7 +546,7 @@ TEST_F(DiveImportErrors, NavTimeGoingBackwards) {
   // Line 10's time put before line 9's.
   const std::string nav = editedNav(10, [](const std::string& l) { return "1372687209.0" + l.substr(l.find(',')); });
   const auto args = replaceArg(args_, "--nav", nav);
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput,
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput,
                     {"line 10", "goes backwards", "line 9"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
@@ -566,15 +566,15 @@ TEST_F(DiveImportErrors, NanOrGarbageInNav) {
     return out;
   });
   const auto args = replaceArg(args_, "--nav", nan_nav);
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"line 7, column 'z'", "not finite"});
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput, {"line 7, column 'z'", "not finite"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("line 7, column 'z'"), std::string::npos) << run.err;
   const std::string garbage = editedNav(4, [](const std::string& l) { return l.substr(0, l.rfind(',')) + ",abc"; });
-  expectImportError([&] { prepare(replaceArg(args_, "--nav", garbage)); }, sim::DiveImportError::Kind::kInput,
+  expectImportError([&] { prepare(replaceArg(args_, "--nav", garbage)); }, dive::DiveImportError::Kind::kInput,
                     {"line 4, column 'qw'", "'abc' is not a number"});
   const std::string short_row = editedNav(5, [](const std::string& l) { return l.substr(0, l.rfind(',')); });
-  expectImportError([&] { prepare(replaceArg(args_, "--nav", short_row)); }, sim::DiveImportError::Kind::kInput,
+  expectImportError([&] { prepare(replaceArg(args_, "--nav", short_row)); }, dive::DiveImportError::Kind::kInput,
                     {"line 5 has 9 fields but the header has 10"});
   expectNoOutput();
 }
@@ -584,7 +584,7 @@ TEST_F(DiveImportErrors, CameraYamlWithoutCameraMatrix) {
             "image_width: 384\nimage_height: 288\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n"
             "  data: [0, 0, 0, 0, 0]\n");
   const auto args = replaceArg(args_, "--camera", dir_ / "camera.yaml");
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"--camera", "camera_matrix"});
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput, {"--camera", "camera_matrix"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("camera_matrix"), std::string::npos) << run.err;
@@ -603,16 +603,16 @@ TEST_F(DiveImportErrors, ImageOfAnotherSize) {
   EXPECT_NE(run.err.find("img_1.png' is 200x100 pixels but the camera (--camera) is 384x288"), std::string::npos)
       << run.err;
   expectNoOutput();
-  const sim::DiveImport dive = prepare(args);
+  const dive::DiveImport dive = prepare(args);
   RecordingSink sink;
-  expectImportError([&] { sim::writeDiveImport(dive, &sink); }, sim::DiveImportError::Kind::kInput,
+  expectImportError([&] { dive::writeDiveImport(dive, &sink); }, dive::DiveImportError::Kind::kInput,
                     {"img_1.png", "200x100", "384x288"});
 }
 
 TEST_F(DiveImportErrors, OutputFolderDoesNotExist) {
   const std::string output = dir_ / "no_such_folder/out.bag";
   const auto args = replaceArg(args_, "--output", output);
-  expectImportError([&] { prepare(args); }, sim::DiveImportError::Kind::kInput, {"--output", "does not exist"});
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput, {"--output", "does not exist"});
   const RunResult run = runTool(args, dir_);
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("--output"), std::string::npos) << run.err;
@@ -630,7 +630,7 @@ TEST_F(DiveImportErrors, UsageErrorsAndHelp) {
   EXPECT_EQ(none.exit_code, 2);
   EXPECT_NE(none.err.find("--images is required"), std::string::npos) << none.err;
   const auto expectUsage = [&](std::vector<std::string> args, const std::string& part) {
-    expectImportError([&] { sim::parseDiveImportArguments(args); }, sim::DiveImportError::Kind::kInput, {part});
+    expectImportError([&] { dive::parseDiveImportArguments(args); }, dive::DiveImportError::Kind::kInput, {part});
   };
   std::vector<std::string> args = args_;
   args.insert(args.end(), {"--encoding", "rgb8"});

@@ -13,10 +13,11 @@
 #include <unistd.h>
 
 #include "exocet_mosaic/sim/dive_description.h"
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 #include "exocet_common/testing/paths.h"
 
 using namespace exocet_mosaic::sim;
+namespace dive = exocet_mosaic::dive;
 
 namespace {
 
@@ -97,7 +98,7 @@ double worstLandmarkError(const GeometryCase& c, int* checked) {
   const DiveDescription dive = parseDiveDescription("", o, ".");
   Seabed seabed = makeSeabed(dive.seabed, dive.synthesis.seed);
   DiveSynthesizer synth(dive.synthesis, seabed.texture.get(), seabed.relief.get());
-  const CameraModel& cam = dive.synthesis.rig.camera;
+  const exocet_common::CameraModel& cam = dive.synthesis.rig.camera;
   double worst = 0.0;
   *checked = 0;
   for (const Landmark& m : synth.renderer().landmarks()) {
@@ -144,7 +145,7 @@ TEST(DiveSynthGeometry, LandmarkAppearsAtPredictedPixelWithReliefAndDistortion) 
 }
 
 TEST(DiveSynthGeometry, CameraModelDistortionRoundTrip) {
-  CameraModel c = CameraModel::pal();
+  exocet_common::CameraModel c = exocet_common::CameraModel::pal();
   c.distortion = {-0.3, 0.1, 0.002, -0.001, 0.01};
   for (double x = -0.6; x <= 0.6; x += 0.2)
     for (double y = -0.45; y <= 0.45; y += 0.15) {
@@ -172,20 +173,20 @@ NoiseRun runSensors(const NavigationSensorConfig& cfg, double duration_s) {
   tc.pitch_amplitude_deg = 3;
   tc.altitude_variation_m = 0.3;
   const VehicleTrajectory traj(tc);
-  const GeoReference geo = makeGeoReference(43.0, 5.9);
+  const exocet_common::GeoReference geo = exocet_common::makeGeoReference(43.0, 5.9);
   const double t0 = 1.78e9, depth0 = 60.0;
   NavigationSensorSimulator sim(cfg, geo, depth0, t0, 99);
   NoiseRun r;
   NavigationSinks s;
   auto truth = [&](double stamp) { return traj.stateAt(stamp - t0); };
-  s.depth = [&](const DepthRecord& d) { r.depth.push_back(d.depth_m - (depth0 - truth(d.stamp_s).position_m.z())); };
-  s.altitude = [&](const AltitudeRecord& a) {
+  s.depth = [&](const dive::DepthRecord& d) { r.depth.push_back(d.depth_m - (depth0 - truth(d.stamp_s).position_m.z())); };
+  s.altitude = [&](const dive::AltitudeRecord& a) {
     const VehicleState st = truth(a.stamp_s);
     r.altitude.push_back(a.range_m - rayToSeabed_m(st.position_m, -st.rotation().col(2), FlatRelief()));
   };
-  s.usbl = [&](const FixRecord& f) {
+  s.usbl = [&](const dive::FixRecord& f) {
     const VehicleState st = truth(f.stamp_s);
-    const Eigen::Vector2d en = latLonToGrid(geo, f.latitude_deg, f.longitude_deg);
+    const Eigen::Vector2d en = exocet_common::latLonToGrid(geo, f.latitude_deg, f.longitude_deg);
     const double de = en.x() - (geo.origin_easting_m + st.position_m.x());
     const double dn = en.y() - (geo.origin_northing_m + st.position_m.y());
     ++r.usbl_count;
@@ -198,13 +199,13 @@ NoiseRun runSensors(const NavigationSensorConfig& cfg, double duration_s) {
     r.usbl_u.push_back(f.altitude_m - (st.position_m.z() - depth0));
     r.latency.push_back(f.arrival_s - f.stamp_s);
   };
-  s.dvl = [&](const DvlRecord& d) {
+  s.dvl = [&](const dive::DvlRecord& d) {
     const VehicleState st = truth(d.stamp_s);
     const Eigen::Vector3d v = st.rotation().transpose() * st.velocity_mps;
     r.dvl_x.push_back(d.velocity_mps.x() - v.x());
     r.dvl_y.push_back(d.velocity_mps.y() - v.y());
   };
-  s.imu = [&](const ImuRecord& m) {
+  s.imu = [&](const dive::ImuRecord& m) {
     const VehicleState st = truth(m.stamp_s);
     const Eigen::Vector3d e = m.angular_velocity_rps - st.angular_velocity_rps - sim.gyroBias();
     r.gyro_x.push_back(e.x());
@@ -271,12 +272,12 @@ TEST(NavigationSensors, GyroBiasRandomWalkAndUsblOutliersMatchTheirConfiguration
 TEST(NavigationSensors, DeadReckoningDriftsWhileUsblDoesNot) {
   std::vector<std::string> o = {"trajectory.line_length_m=60", "trajectory.line_count=3"};
   const DiveDescription dive = parseDiveDescription("", o, ".");
-  const GeoReference& geo = dive.synthesis.geo;
+  const exocet_common::GeoReference& geo = dive.synthesis.geo;
   const VehicleTrajectory traj(dive.synthesis.trajectory);
   NavigationSensorSimulator sim(dive.synthesis.navigation, geo, 60.0, 0.0, 5);
   double last_error = 0;
   NavigationSinks s;
-  s.dead_reckoning = [&](const PoseRecord& p) {
+  s.dead_reckoning = [&](const dive::PoseRecord& p) {
     const VehicleState st = traj.stateAt(p.stamp_s);
     last_error = std::hypot(p.position_m.x() - geo.origin_easting_m - st.position_m.x(),
                             p.position_m.y() - geo.origin_northing_m - st.position_m.y());

@@ -5,7 +5,7 @@
 
 #include "exocet_mosaic/fusion/image_heading.h"
 #include "exocet_mosaic/fusion/measurement_history.h"
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 #include "exocet_mosaic/sim/image_motion_truth.h"
 
@@ -53,7 +53,7 @@ TEST(ScalarHistory, InterpolatesLinearly) {
 // The heading change read from the true seabed homography of two views of a camera looking down from a vehicle that
 // turns, rolls and pitches: the yaw change must come back within a small fraction of a degree.
 TEST(ImageHeading, YawChangeFromTrueSeabedHomography) {
-  const sim::CameraModel camera = sim::CameraModel::pal(60.0);
+  const exocet_common::CameraModel camera = exocet_common::CameraModel::pal(60.0);
   sim::CameraRig rig;
   rig.lever_arm_m = Eigen::Vector3d(0.4, 0.0, -0.3);
   const Eigen::Isometry3d base_from_camera = rig.baseFromCamera();

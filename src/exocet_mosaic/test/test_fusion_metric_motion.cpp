@@ -9,7 +9,7 @@
 
 #include "exocet_mosaic/fusion/metric_motion.h"
 #include "exocet_mosaic/registration/motion_model.h"
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 #include "exocet_mosaic/sim/image_motion_truth.h"
 #include "exocet_mosaic/sim/vehicle_trajectory.h"
@@ -24,7 +24,7 @@ using registration::MotionModel;
 
 constexpr double kDeg = M_PI / 180.0;
 
-Eigen::Matrix3d cameraMatrix(const sim::CameraModel& c) {
+Eigen::Matrix3d cameraMatrix(const exocet_common::CameraModel& c) {
   Eigen::Matrix3d k;
   k << c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0;
   return k;
@@ -58,7 +58,7 @@ struct TruePair {
 };
 
 TruePair truePair(const sim::CameraRig& rig, const Pose& a, const Pose& b, MotionModel model) {
-  const sim::CameraModel& cam = rig.camera;
+  const exocet_common::CameraModel& cam = rig.camera;
   TruePair t;
   t.centre = Eigen::Vector2d(0.5 * (cam.width - 1), 0.5 * (cam.height - 1));
   const Eigen::Matrix3d h = sim::seabedPlaneHomography(cam, cameraPose(a, rig), cameraPose(b, rig));
@@ -73,7 +73,7 @@ TruePair truePair(const sim::CameraRig& rig, const Pose& a, const Pose& b, Motio
 
 sim::CameraRig tiltedRig() {
   sim::CameraRig rig;
-  rig.camera = sim::CameraModel::pal(60.0);
+  rig.camera = exocet_common::CameraModel::pal(60.0);
   rig.lever_arm_m = Eigen::Vector3d(0.4, 0.1, -0.3);
   rig.mounting_rpy_deg = Eigen::Vector3d(2.0, -1.5, 3.0);
   return rig;
@@ -152,7 +152,7 @@ TEST(MetricMotion, PixelSizeIsHeightOverAlphaOnANadirCamera) {
 
   // Nadir camera, level vehicle heading east: an image translation of t pixels is t * h / alpha metres.
   sim::CameraRig rig;
-  rig.camera = sim::CameraModel::pal(60.0);
+  rig.camera = exocet_common::CameraModel::pal(60.0);
   rig.lever_arm_m.setZero();
   CameraMount mount;
   mount.camera_matrix = cameraMatrix(rig.camera);

@@ -74,7 +74,7 @@ TEST(MotionModel, WarpJacobianMatchesFiniteDifferences) {
 }
 
 TEST(ImageMotionTruth, PlaneHomographyAgreesWithRayCasting) {
-  const sim::CameraModel camera = sim::CameraModel::pal();
+  const exocet_common::CameraModel camera = exocet_common::CameraModel::pal();
   Eigen::Isometry3d a = Eigen::Isometry3d::Identity(), b = Eigen::Isometry3d::Identity();
   // Looking down (camera z to -z of the local frame) from 2.5 m, then moved, turned and tilted a little.
   a.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();

@@ -23,7 +23,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "exocet_mosaic/selfcal/self_calibration.h"
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
 #include "exocet_common/testing/paths.h"
@@ -42,7 +42,7 @@ struct Dive {
   fs::path folder;  ///< the frames as PNG files
 };
 
-std::array<double, 4> percentErrors(const selfcal::Intrinsics& e, const sim::CameraModel& truth) {
+std::array<double, 4> percentErrors(const selfcal::Intrinsics& e, const exocet_common::CameraModel& truth) {
   return {100.0 * (e.alpha_u / truth.fx - 1.0), 100.0 * (e.alpha_v / truth.fy - 1.0), 100.0 * (e.u0 / truth.cx - 1.0),
           100.0 * (e.v0 / truth.cy - 1.0)};
 }
@@ -114,7 +114,7 @@ Dive* RenderedSelfCalibration::flat_ = nullptr;
 
 TEST_F(RenderedSelfCalibration, TheReliefDiveGivesTheSimulatorsIntrinsicsAndExtrinsics) {
   ASSERT_EQ(relief_->rendered.gray.size(), 71u);
-  const sim::CameraModel& truth = relief_->rendered.camera;
+  const exocet_common::CameraModel& truth = relief_->rendered.camera;
   const selfcal::SelfCalibrationResult r =
       selfcal::selfCalibrate(pairsOf(*relief_), cv::Size(truth.width, truth.height), selfcal::SelfCalibrationConfig());
   const std::string summary = selfcal::summaryText(r);
@@ -157,7 +157,7 @@ TEST_F(RenderedSelfCalibration, TheReliefDiveGivesTheSimulatorsIntrinsicsAndExtr
 }
 
 TEST_F(RenderedSelfCalibration, TheSameDiveOverAFlatSeabedIsDetectedAsPlanar) {
-  const sim::CameraModel& truth = flat_->rendered.camera;
+  const exocet_common::CameraModel& truth = flat_->rendered.camera;
   const std::vector<selfcal::KeyFramePair> pairs = pairsOf(*flat_);
   try {
     selfcal::selfCalibrate(pairs, cv::Size(truth.width, truth.height), selfcal::SelfCalibrationConfig());
@@ -198,10 +198,10 @@ TEST_F(RenderedSelfCalibration, TheToolCalibratesAnImageFolderAndWritesAYamlThat
     EXPECT_NE(run.out.find(word), std::string::npos) << word << " missing from:\n" << run.out;
 
   // The same images through the library give the same numbers.
-  const sim::CameraModel& truth = relief_->rendered.camera;
+  const exocet_common::CameraModel& truth = relief_->rendered.camera;
   const selfcal::SelfCalibrationResult expected =
       selfcal::selfCalibrate(pairsOf(*relief_), cv::Size(truth.width, truth.height), selfcal::SelfCalibrationConfig());
-  const sim::CameraModel loaded = sim::loadCameraModelYaml(yaml.string());
+  const exocet_common::CameraModel loaded = exocet_common::loadCameraModelYaml(yaml.string());
   EXPECT_EQ(loaded.width, truth.width);
   EXPECT_EQ(loaded.height, truth.height);
   EXPECT_NEAR(loaded.fx, expected.intrinsics.value.alpha_u, 1e-9 * truth.fx);
@@ -246,7 +246,7 @@ TEST_F(RenderedSelfCalibration, TheToolRefusesAFlatSeabedWithExitCode3AndCalibra
   const ToolRun planar = runTool(common + " --planar", *scratch_);
   ASSERT_EQ(planar.exit_code, 0) << planar.out << planar.err;
   EXPECT_NE(planar.out.find("FLAT seabed"), std::string::npos) << planar.out;
-  const sim::CameraModel loaded = sim::loadCameraModelYaml(yaml.string());
+  const exocet_common::CameraModel loaded = exocet_common::loadCameraModelYaml(yaml.string());
   EXPECT_NEAR(loaded.fx, flat_->rendered.camera.fx, 0.03 * flat_->rendered.camera.fx);
   EXPECT_EQ(YAML::LoadFile(yaml.string())["self_calibration"]["method"].as<std::string>(), "planar_homographies");
 }
@@ -273,13 +273,13 @@ TEST_F(RenderedSelfCalibration, TheToolReadsRawAndCompressedImagesFromABag) {
     }
   }
   const std::string common = "--bag " + bag_path.string() + " --step " + std::to_string(kStep);
-  std::vector<sim::CameraModel> results;
+  std::vector<exocet_common::CameraModel> results;
   for (const char* topic : {"/camera/image_raw", "/camera/image_raw/compressed"}) {
     const fs::path yaml = *scratch_ / "bag.yaml";
     const ToolRun run = runTool(common + " --image-topic " + topic + " --output " + yaml.string(), *scratch_);
     ASSERT_EQ(run.exit_code, 0) << topic << "\n" << run.out << run.err;
     EXPECT_NE(run.out.find("Read 71 frames (384x288)"), std::string::npos) << run.out;
-    results.push_back(sim::loadCameraModelYaml(yaml.string()));
+    results.push_back(exocet_common::loadCameraModelYaml(yaml.string()));
   }
   // Lossless PNG: both topics carry the same pixels, hence the same calibration.
   EXPECT_DOUBLE_EQ(results[0].fx, results[1].fx);

@@ -64,7 +64,7 @@ void copyCovariance(const Eigen::Matrix<double, 6, 6>& c, boost::array<double, N
   for (int r = 0; r < 6; ++r)
     for (int k = 0; k < 6; ++k) (*out)[r * 6 + k] = c(r, k);
 }
-nav_msgs::Odometry toOdometry(const sim::PoseRecord& pose, const std::string& frame) {
+nav_msgs::Odometry toOdometry(const dive::PoseRecord& pose, const std::string& frame) {
   nav_msgs::Odometry odom;
   odom.header = header(pose.stamp_s, frame);
   odom.child_frame_id = frames::kBaseLink;
@@ -85,7 +85,7 @@ ImageStorage parseImageStorage(const std::string& name) {
   throw std::invalid_argument("image storage '" + name + "' is not one of raw, jpeg, png");
 }
 
-sensor_msgs::CameraInfo toCameraInfo(const sim::CameraModel& c, double stamp_s, const std::string& frame_id) {
+sensor_msgs::CameraInfo toCameraInfo(const exocet_common::CameraModel& c, double stamp_s, const std::string& frame_id) {
   sensor_msgs::CameraInfo info;
   info.header = header(stamp_s, frame_id);
   info.width = c.width;
@@ -139,7 +139,7 @@ void DiveBagWriter::write(const std::string& topic, double record_time_s, const 
   ++message_count_;
 }
 
-void DiveBagWriter::writeDatum(const sim::GeoReference& d, double stamp_s) {
+void DiveBagWriter::writeDatum(const exocet_common::GeoReference& d, double stamp_s) {
   exocet_msgs::GeoDatum m;
   m.header = header(stamp_s, options_.world_frame);
   m.frame_id = options_.world_frame;
@@ -153,7 +153,7 @@ void DiveBagWriter::writeDatum(const sim::GeoReference& d, double stamp_s) {
   write(topics::kNavDatum, stamp_s, m, true);
 }
 
-void DiveBagWriter::writeStaticTransforms(const std::vector<sim::StaticTransform>& transforms, double stamp_s) {
+void DiveBagWriter::writeStaticTransforms(const std::vector<dive::StaticTransform>& transforms, double stamp_s) {
   tf2_msgs::TFMessage m;
   for (const auto& t : transforms) {
     geometry_msgs::TransformStamped ts;
@@ -166,7 +166,7 @@ void DiveBagWriter::writeStaticTransforms(const std::vector<sim::StaticTransform
   write(topics::kTfStatic, stamp_s, m, true);
 }
 
-void DiveBagWriter::writeCameraFrame(const sim::CameraFrame& frame, const sim::CameraModel& camera) {
+void DiveBagWriter::writeCameraFrame(const dive::CameraFrame& frame, const exocet_common::CameraModel& camera) {
   if (frame.image.cols != camera.width || frame.image.rows != camera.height)
     throw std::invalid_argument("frame " + std::to_string(frame.index) + " is " + std::to_string(frame.image.cols) +
                                 "x" + std::to_string(frame.image.rows) + " but camera_info says " +
@@ -179,7 +179,7 @@ void DiveBagWriter::writeCameraFrame(const sim::CameraFrame& frame, const sim::C
     sensor_msgs::CompressedImage msg;
     msg.header = h;
     if (frame.compressed.empty()) {
-      sim::CameraFrame compressed;
+      dive::CameraFrame compressed;
       compressed.index = frame.index;
       compressed.image = frame.image;
       compressed.encoding = frame.encoding;
@@ -195,7 +195,7 @@ void DiveBagWriter::writeCameraFrame(const sim::CameraFrame& frame, const sim::C
   write(topics::kCameraInfo, frame.stamp_s, toCameraInfo(camera, frame.stamp_s, frames::kCameraOptical));
 }
 
-void DiveBagWriter::compressFrame(sim::CameraFrame* frame) const {
+void DiveBagWriter::compressFrame(dive::CameraFrame* frame) const {
   if (options_.image_storage == ImageStorage::kRaw) return;
   std::vector<int> params;
   std::string ext;
@@ -212,11 +212,11 @@ void DiveBagWriter::compressFrame(sim::CameraFrame* frame) const {
     throw std::runtime_error("cannot encode frame " + std::to_string(frame->index) + " as " + ext);
 }
 
-void DiveBagWriter::writeNavOdometry(const sim::PoseRecord& pose) {
+void DiveBagWriter::writeNavOdometry(const dive::PoseRecord& pose) {
   write(topics::kNavOdometry, pose.stamp_s, toOdometry(pose, options_.world_frame));
 }
 
-void DiveBagWriter::writeDvl(const sim::DvlRecord& dvl) {
+void DiveBagWriter::writeDvl(const dive::DvlRecord& dvl) {
   geometry_msgs::TwistWithCovarianceStamped m;
   m.header = header(dvl.stamp_s, frames::kBaseLink);
   m.twist.twist.linear = toVector(dvl.velocity_mps);
@@ -226,7 +226,7 @@ void DiveBagWriter::writeDvl(const sim::DvlRecord& dvl) {
   write(topics::kNavDvl, dvl.stamp_s, m);
 }
 
-void DiveBagWriter::writeImu(const sim::ImuRecord& imu) {
+void DiveBagWriter::writeImu(const dive::ImuRecord& imu) {
   sensor_msgs::Imu m;
   m.header = header(imu.stamp_s, frames::kBaseLink);
   m.orientation = toMsg(imu.orientation);
@@ -240,7 +240,7 @@ void DiveBagWriter::writeImu(const sim::ImuRecord& imu) {
   write(topics::kNavImu, imu.stamp_s, m);
 }
 
-void DiveBagWriter::writeDepth(const sim::DepthRecord& depth) {
+void DiveBagWriter::writeDepth(const dive::DepthRecord& depth) {
   exocet_msgs::Depth m;
   m.header = header(depth.stamp_s, frames::kBaseLink);
   m.depth_m = depth.depth_m;
@@ -248,7 +248,7 @@ void DiveBagWriter::writeDepth(const sim::DepthRecord& depth) {
   write(topics::kNavDepth, depth.stamp_s, m);
 }
 
-void DiveBagWriter::writeAltitude(const sim::AltitudeRecord& a) {
+void DiveBagWriter::writeAltitude(const dive::AltitudeRecord& a) {
   sensor_msgs::Range m;
   m.header = header(a.stamp_s, frames::kAltimeter);
   m.radiation_type = sensor_msgs::Range::ULTRASOUND;
@@ -259,7 +259,7 @@ void DiveBagWriter::writeAltitude(const sim::AltitudeRecord& a) {
   write(topics::kNavAltitude, a.stamp_s, m);
 }
 
-void DiveBagWriter::writeUsbl(const sim::FixRecord& fix) {
+void DiveBagWriter::writeUsbl(const dive::FixRecord& fix) {
   sensor_msgs::NavSatFix m;
   m.header = header(fix.stamp_s, frames::kUsbl);
   m.status.status = sensor_msgs::NavSatStatus::STATUS_FIX;
@@ -273,7 +273,7 @@ void DiveBagWriter::writeUsbl(const sim::FixRecord& fix) {
   write(topics::kNavUsbl, fix.arrival_s, m);
 }
 
-void DiveBagWriter::writeGroundTruth(const sim::PoseRecord& pose) {
+void DiveBagWriter::writeGroundTruth(const dive::PoseRecord& pose) {
   write(topics::kGroundTruthOdometry, pose.stamp_s, toOdometry(pose, options_.world_frame));
 }
 

@@ -50,7 +50,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   front_end_ =
       std::make_unique<fu::FusionFrontEnd>(front_end, [this](const std::string& frame) { return mountOf(frame); });
   if (config_.utm_zone > 0) {
-    grid_ = fu::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
+    grid_ = exocet_common::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
     grid_source_ = "parameter ~utm_zone";
   }
 
@@ -183,9 +183,9 @@ void FusionRos::countResult(const std::string& kind, const fu::UpdateResult& res
 // ---------------------------------------------------------------------------------------------------------------
 // Geography, mounts, attitude and height.
 
-const fu::UtmGrid* FusionRos::gridFor(double latitude_deg, double longitude_deg) {
+const exocet_common::UtmGrid* FusionRos::gridFor(double latitude_deg, double longitude_deg) {
   if (!grid_) {
-    grid_ = fu::UtmGrid::forLatLon(latitude_deg, longitude_deg);  // throws on a bad latitude/longitude
+    grid_ = exocet_common::UtmGrid::forLatLon(latitude_deg, longitude_deg);  // throws on a bad latitude/longitude
     grid_source_ = "the first latitude/longitude";
     ROS_INFO("fusion: UTM zone %s (EPSG %d) from %s", grid_->name().c_str(), grid_->epsg(), grid_source_.c_str());
   }
@@ -356,7 +356,7 @@ void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
 void FusionRos::onDatum(const exocet_msgs::GeoDatumConstPtr& msg) {
   if (config_.utm_zone > 0) return;  // the parameter wins
   try {
-    fu::UtmGrid grid = fu::UtmGrid::fromZone(msg->utm_zone, msg->northern_hemisphere);
+    exocet_common::UtmGrid grid = exocet_common::UtmGrid::fromZone(msg->utm_zone, msg->northern_hemisphere);
     if (!grid_ || grid_->zone() != grid.zone() || grid_->northern() != grid.northern()) {
       if (grid_ && front_end_->filter().initialized())
         ROS_WARN("fusion: /nav/datum gives zone %s, but %s was in use from %s: keeping it", grid.name().c_str(),

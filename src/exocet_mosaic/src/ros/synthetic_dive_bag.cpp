@@ -8,7 +8,7 @@
 #include "exocet_mosaic/ros/dive_bag_writer.h"
 #include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_common/atomic_file.h"
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 #include "exocet_mosaic/sim/image_seabed.h"
 
 namespace exocet_mosaic {
@@ -52,10 +52,10 @@ SyntheticDiveSummary writeSyntheticDive(const sim::DiveDescription& dive, const 
   options.compress_chunks = dive.compress_chunks;
   DiveBagWriter writer(output, options);
   writer.writeDatum(cfg.geo, cfg.start_time_unix_s);
-  StaticTransform camera{frames::kBaseLink, frames::kCameraOptical, cfg.rig.baseFromCamera()};
-  StaticTransform altimeter{frames::kBaseLink, frames::kAltimeter, Eigen::Isometry3d::Identity()};
+  dive::StaticTransform camera{frames::kBaseLink, frames::kCameraOptical, cfg.rig.baseFromCamera()};
+  dive::StaticTransform altimeter{frames::kBaseLink, frames::kAltimeter, Eigen::Isometry3d::Identity()};
   altimeter.parent_from_child.linear() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  StaticTransform usbl{frames::kBaseLink, frames::kUsbl, Eigen::Isometry3d::Identity()};
+  dive::StaticTransform usbl{frames::kBaseLink, frames::kUsbl, Eigen::Isometry3d::Identity()};
   writer.writeStaticTransforms({camera, altimeter, usbl}, cfg.start_time_unix_s);
 
   std::ostringstream truth_csv;
@@ -63,13 +63,13 @@ SyntheticDiveSummary writeSyntheticDive(const sim::DiveDescription& dive, const 
                "cam_northing_m,cam_up_m,cam_qx,cam_qy,cam_qz,cam_qw,camera_altitude_m,gsd_m,latitude_deg,"
                "longitude_deg,depth_m\n";
   DiveSink sink;
-  sink.navigation.imu = [&](const ImuRecord& r) { writer.writeImu(r); };
-  sink.navigation.dvl = [&](const DvlRecord& r) { writer.writeDvl(r); };
-  sink.navigation.dead_reckoning = [&](const PoseRecord& r) { writer.writeNavOdometry(r); };
-  sink.navigation.depth = [&](const DepthRecord& r) { writer.writeDepth(r); };
-  sink.navigation.altitude = [&](const AltitudeRecord& r) { writer.writeAltitude(r); };
-  sink.navigation.usbl = [&](const FixRecord& r) { writer.writeUsbl(r); };
-  sink.ground_truth = [&](const PoseRecord& r) { writer.writeGroundTruth(r); };
+  sink.navigation.imu = [&](const dive::ImuRecord& r) { writer.writeImu(r); };
+  sink.navigation.dvl = [&](const dive::DvlRecord& r) { writer.writeDvl(r); };
+  sink.navigation.dead_reckoning = [&](const dive::PoseRecord& r) { writer.writeNavOdometry(r); };
+  sink.navigation.depth = [&](const dive::DepthRecord& r) { writer.writeDepth(r); };
+  sink.navigation.altitude = [&](const dive::AltitudeRecord& r) { writer.writeAltitude(r); };
+  sink.navigation.usbl = [&](const dive::FixRecord& r) { writer.writeUsbl(r); };
+  sink.ground_truth = [&](const dive::PoseRecord& r) { writer.writeGroundTruth(r); };
   // Compression on the rendering threads: JPEG encoding would otherwise queue on the one thread that writes.
   sink.prepare_frame = [&writer](FrameTruth* f) { writer.compressFrame(&f->frame); };
   sink.frame = [&](const FrameTruth& f) {
@@ -95,7 +95,7 @@ SyntheticDiveSummary writeSyntheticDive(const sim::DiveDescription& dive, const 
   marks_csv << "id,x_m,y_m,easting_m,northing_m,up_m,latitude_deg,longitude_deg,size_m\n";
   for (const Landmark& m : synth.renderer().landmarks()) {
     const Eigen::Vector3d w = synth.toWorld(Eigen::Vector3d(m.x_m, m.y_m, seabed.relief->heightAt_m(m.x_m, m.y_m)));
-    const Eigen::Vector2d ll = gridToLatLon(cfg.geo, w.x(), w.y());
+    const Eigen::Vector2d ll = exocet_common::gridToLatLon(cfg.geo, w.x(), w.y());
     marks_csv << m.id << ',' << csvNumber(m.x_m, 4) << ',' << csvNumber(m.y_m, 4) << ',' << csvNumber(w.x(), 4) << ','
               << csvNumber(w.y(), 4) << ',' << csvNumber(w.z(), 4) << ',' << csvNumber(ll.x(), 9) << ','
               << csvNumber(ll.y(), 9) << ',' << csvNumber(m.size_m, 3) << '\n';

@@ -25,7 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "exocet_common/ros/parameter_reader.h"
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 #include "exocet_common/json_file.h"
 
 namespace exocet_mosaic {
@@ -690,7 +690,7 @@ void TrajectoryLogger::writeFix(Stream* stream, FileSet* set, const PendingFix& 
   double northing_m = std::nan("");
   if (have_datum_) {
     try {
-      const Eigen::Vector2d grid = sim::latLonToGrid(datum_, fix.latitude_deg, fix.longitude_deg);
+      const Eigen::Vector2d grid = exocet_common::latLonToGrid(datum_, fix.latitude_deg, fix.longitude_deg);
       easting_m = grid.x();
       northing_m = grid.y();
     } catch (const std::exception& e) {

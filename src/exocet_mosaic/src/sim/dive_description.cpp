@@ -7,7 +7,7 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 
 namespace exocet_mosaic {
 namespace sim {
@@ -186,10 +186,10 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
     throw std::invalid_argument("camera.preset '" + d.camera_preset + "' is not one of pal, hd");
   if (!(d.camera_hfov_deg >= 10.0 && d.camera_hfov_deg <= 150.0))
     throw std::invalid_argument("camera.hfov_deg = " + std::to_string(d.camera_hfov_deg) + " out of range [10, 150] deg");
-  rig.camera = d.camera_preset == "hd" ? CameraModel::hd(d.camera_hfov_deg) : CameraModel::pal(d.camera_hfov_deg);
+  rig.camera = d.camera_preset == "hd" ? exocet_common::CameraModel::hd(d.camera_hfov_deg) : exocet_common::CameraModel::pal(d.camera_hfov_deg);
   if (!d.intrinsics_yaml.empty()) {
     try {
-      rig.camera = loadCameraModelYaml(d.intrinsics_yaml);
+      rig.camera = exocet_common::loadCameraModelYaml(d.intrinsics_yaml);
     } catch (const std::runtime_error& e) {
       throw std::invalid_argument(std::string("camera.intrinsics_yaml: ") + e.what());
     }
@@ -346,7 +346,7 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   if (!(d.seabed.relief_scale >= 0.0 && d.seabed.relief_scale <= 2.0))
     throw std::invalid_argument("seabed.relief_scale = " + std::to_string(d.seabed.relief_scale) + " out of range [0, 2]");
 
-  s.geo = makeGeoReference(d.origin_latitude_deg, d.origin_longitude_deg);
+  s.geo = exocet_common::makeGeoReference(d.origin_latitude_deg, d.origin_longitude_deg);
   const std::string problem = s.validate();
   if (!problem.empty()) throw std::invalid_argument(problem);
   if (d.landmark_count > 0) {

@@ -6,8 +6,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "exocet_mosaic/sim/geo_reference.h"
-#include "exocet_mosaic/sim/ordered_work_pool.h"
+#include "exocet_common/geo_reference.h"
+#include "exocet_common/ordered_work_pool.h"
 #include "exocet_mosaic/sim/random.h"
 
 namespace exocet_mosaic {
@@ -139,7 +139,7 @@ Eigen::Isometry3d DiveSynthesizer::cameraPoseLocal(double t_s) const {
 
 WorldRect DiveSynthesizer::footprintOnReferencePlane(double t_s) const {
   const Eigen::Isometry3d pose = cameraPoseLocal(t_s);
-  const CameraModel& c = config_.rig.camera;
+  const exocet_common::CameraModel& c = config_.rig.camera;
   WorldRect r{1e300, 1e300, -1e300, -1e300};
   for (const auto& px : {Eigen::Vector2d(0, 0), Eigen::Vector2d(c.width - 1, 0), Eigen::Vector2d(0, c.height - 1),
                          Eigen::Vector2d(c.width - 1, c.height - 1)}) {
@@ -165,7 +165,7 @@ FrameTruth DiveSynthesizer::renderFrame(int k, bool dropped, const DiveSink& sin
   truth.camera_altitude_m = rayToSeabed_m(local.translation(), local.linear().col(2), *relief_);
   truth.ground_sample_distance_m = truth.camera_altitude_m / std::sqrt(config_.rig.camera.fx * config_.rig.camera.fy);
   const Eigen::Vector3d c = truth.world_from_camera.translation();
-  truth.latlon_deg = gridToLatLon(config_.geo, c.x(), c.y());
+  truth.latlon_deg = exocet_common::gridToLatLon(config_.geo, c.x(), c.y());
   truth.frame.stamp_s = config_.start_time_unix_s + t;
   truth.frame.index = k;
   truth.frame.encoding = config_.rig.encoding;
@@ -195,7 +195,7 @@ void DiveSynthesizer::run(const DiveSink& sink) {
   };
   // Frames are rendered ahead on the workers (each frame a function of its index alone) while this thread emits
   // everything in time order; `ahead` bounds the frames held in memory.
-  std::optional<OrderedWorkPool<FrameTruth>> pool;
+  std::optional<exocet_common::OrderedWorkPool<FrameTruth>> pool;
   if (config_.threads > 1 && frames > 1)
     pool.emplace(frames, config_.threads, 2 * config_.threads,
                  [&](int k) { return renderFrame(k, dropped[static_cast<size_t>(k)], sink); });

@@ -11,7 +11,7 @@ namespace sim {
 namespace {
 
 // K [r1 r2 t]: maps a point (X, Y) of the plane z = 0 to the camera's homogeneous pixel.
-Eigen::Matrix3d planeToImage(const CameraModel& camera, const Eigen::Isometry3d& local_from_camera) {
+Eigen::Matrix3d planeToImage(const exocet_common::CameraModel& camera, const Eigen::Isometry3d& local_from_camera) {
   const Eigen::Isometry3d camera_from_local = local_from_camera.inverse();
   Eigen::Matrix3d m;
   m.col(0) = camera_from_local.linear().col(0);
@@ -24,13 +24,13 @@ Eigen::Matrix3d planeToImage(const CameraModel& camera, const Eigen::Isometry3d&
 
 }  // namespace
 
-Eigen::Matrix3d seabedPlaneHomography(const CameraModel& camera, const Eigen::Isometry3d& local_from_a,
+Eigen::Matrix3d seabedPlaneHomography(const exocet_common::CameraModel& camera, const Eigen::Isometry3d& local_from_a,
                                       const Eigen::Isometry3d& local_from_b) {
   Eigen::Matrix3d h = planeToImage(camera, local_from_b) * planeToImage(camera, local_from_a).inverse();
   return h / h(2, 2);
 }
 
-bool transferThroughSeabed(const CameraModel& camera, const Eigen::Isometry3d& local_from_a,
+bool transferThroughSeabed(const exocet_common::CameraModel& camera, const Eigen::Isometry3d& local_from_a,
                            const Eigen::Isometry3d& local_from_b, const SeabedRelief& relief,
                            const Eigen::Vector2d& pixel_a, Eigen::Vector2d* pixel_b) {
   const Eigen::Vector2d xy =

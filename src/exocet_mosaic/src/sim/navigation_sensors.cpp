@@ -4,7 +4,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 
 namespace exocet_mosaic {
 namespace sim {
@@ -55,7 +55,7 @@ std::string NavigationSensorConfig::validate() const {
   return s;
 }
 
-NavigationSensorSimulator::NavigationSensorSimulator(const NavigationSensorConfig& config, const GeoReference& geo,
+NavigationSensorSimulator::NavigationSensorSimulator(const NavigationSensorConfig& config, const exocet_common::GeoReference& geo,
                                                      double seabed_depth_m, double start_time_unix_s, uint64_t seed,
                                                      std::function<double(double, double)> seabed_height)
     : config_(config),
@@ -82,8 +82,8 @@ Eigen::Vector3d NavigationSensorSimulator::toWorld(const Eigen::Vector3d& local)
   return {geo_.origin_easting_m + local.x(), geo_.origin_northing_m + local.y(), local.z() - seabed_depth_m_};
 }
 
-PoseRecord NavigationSensorSimulator::groundTruth(const VehicleState& s) const {
-  PoseRecord p;
+dive::PoseRecord NavigationSensorSimulator::groundTruth(const VehicleState& s) const {
+  dive::PoseRecord p;
   p.stamp_s = t0_unix_s_ + s.t_s;
   p.position_m = toWorld(s.position_m);
   const Eigen::Matrix3d R = s.rotation();
@@ -155,7 +155,7 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
       Eigen::Vector3d(rng_imu_.gaussian(config_.accel_noise_mps2), rng_imu_.gaussian(config_.accel_noise_mps2),
                       rng_imu_.gaussian(config_.accel_noise_mps2));
   if (sinks.imu) {
-    ImuRecord imu;
+    dive::ImuRecord imu;
     imu.stamp_s = stamp;
     imu.orientation = Eigen::Quaterniond(R_measured);
     imu.angular_velocity_rps = measured_rate;
@@ -193,7 +193,7 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
     if (sinks.depth) sinks.depth({stamp, last_depth_m_, config_.depth_noise_m});
   }
   if (due(config_.altimeter_rate_hz) && sinks.altitude) {
-    AltitudeRecord a;
+    dive::AltitudeRecord a;
     a.stamp_s = stamp;
     a.range_m = trueAltitude(s) + rng_alt_.gaussian(config_.altimeter_noise_m);
     if (a.range_m > config_.altimeter_max_range_m) a.range_m = std::numeric_limits<double>::infinity();  // REP-117
@@ -202,7 +202,7 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
     sinks.altitude(a);
   }
   if (due(config_.nav_rate_hz) && sinks.dead_reckoning) {
-    PoseRecord p;
+    dive::PoseRecord p;
     p.stamp_s = stamp;
     dr_position_local_.z() = seabed_depth_m_ - last_depth_m_;  // vertical from the pressure sensor
     p.position_m = toWorld(dr_position_local_);
@@ -233,8 +233,8 @@ void NavigationSensorSimulator::stepImu(const VehicleTrajectory& trajectory, dou
     }
     if (!dropped && sinks.usbl) {
       const Eigen::Vector3d w = toWorld(s.position_m) + err;
-      const Eigen::Vector2d ll = gridToLatLon(geo_, w.x(), w.y());
-      FixRecord f;
+      const Eigen::Vector2d ll = exocet_common::gridToLatLon(geo_, w.x(), w.y());
+      dive::FixRecord f;
       f.stamp_s = stamp;
       f.arrival_s = stamp + config_.usbl_latency_s;
       f.latitude_deg = ll.x();

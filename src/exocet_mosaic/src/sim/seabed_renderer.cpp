@@ -141,7 +141,7 @@ bool SeabedRenderer::isSupportedEncoding(const std::string& e) {
   return e == "bgr8" || e == "rgb8" || e == "mono8" || e == "mono16" || e == "bayer_rggb8";
 }
 
-SeabedRenderer::SeabedRenderer(const CameraModel& camera, const ImagingConfig& imaging, SeabedTexture* texture,
+SeabedRenderer::SeabedRenderer(const exocet_common::CameraModel& camera, const ImagingConfig& imaging, SeabedTexture* texture,
                                SeabedRelief* relief, std::vector<Landmark> landmarks, uint64_t seed,
                                double reference_altitude_m)
     : camera_(camera),

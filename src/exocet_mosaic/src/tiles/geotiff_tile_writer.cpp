@@ -29,7 +29,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/tiles/tile_json.h"
 
 namespace exocet_mosaic {
@@ -221,7 +221,7 @@ void computeBounds(const TileRaster& raster, WrittenTile* tile) {
   tile->max_northing_m = raster.origin_northing_m;
   tile->max_easting_m = raster.origin_easting_m + raster.image.cols * raster.gsd_m;
   tile->min_northing_m = raster.origin_northing_m - raster.image.rows * raster.gsd_m;
-  const auto grid = fusion::UtmGrid::fromZone(raster.utm_zone, raster.northern_hemisphere);
+  const auto grid = exocet_common::UtmGrid::fromZone(raster.utm_zone, raster.northern_hemisphere);
   const double centre_e = 0.5 * (tile->min_easting_m + tile->max_easting_m);
   const double centre_n = 0.5 * (tile->min_northing_m + tile->max_northing_m);
   // Longitudes unwrapped around the zone's central meridian (UTM) or the tile's centre (UPS): a tile crossing the
@@ -669,7 +669,7 @@ std::string TileWriterConfig::validate() const {
   return joined;
 }
 
-int epsgForUtm(int zone, bool northern) { return fusion::UtmGrid::fromZone(zone, northern).epsg(); }
+int epsgForUtm(int zone, bool northern) { return exocet_common::UtmGrid::fromZone(zone, northern).epsg(); }
 
 GeoTiffTileWriter::GeoTiffTileWriter(const TileWriterConfig& config) : config_(config) {
   const std::string error = config_.validate();

@@ -1,5 +1,5 @@
 // dive_import: images + navigation CSV + camera intrinsics -> a dive bag with the simulator's layout.
-// Usage and conventions: dive_import --help (text in sim/dive_import.cpp), README.md (section "Importing a real dive:
+// Usage and conventions: dive_import --help (text in dive/dive_import.cpp), README.md (section "Importing a real dive:
 // dive_import").
 
 #include <csignal>
@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "exocet_mosaic/ros/dive_bag_writer.h"
-#include "exocet_mosaic/sim/dive_import.h"
+#include "exocet_mosaic/dive/dive_import.h"
 
 namespace {
 
@@ -21,30 +21,30 @@ struct Interrupted {
 
 /// Checks for SIGINT/SIGTERM between records: unwinding then destroys the bag writer, which removes the
 /// temporary bag, so that an interrupted import leaves nothing behind.
-class InterruptibleBagSink final : public exocet_mosaic::sim::DiveRecordSink {
+class InterruptibleBagSink final : public exocet_mosaic::dive::DiveRecordSink {
  public:
   explicit InterruptibleBagSink(exocet_mosaic::DiveBagWriter* writer) : sink_(writer) {}
-  void writeDatum(const exocet_mosaic::sim::GeoReference& d, double stamp_s) override {
+  void writeDatum(const exocet_common::GeoReference& d, double stamp_s) override {
     check();
     sink_.writeDatum(d, stamp_s);
   }
-  void writeStaticTransforms(const std::vector<exocet_mosaic::sim::StaticTransform>& t, double stamp_s) override {
+  void writeStaticTransforms(const std::vector<exocet_mosaic::dive::StaticTransform>& t, double stamp_s) override {
     check();
     sink_.writeStaticTransforms(t, stamp_s);
   }
-  void writeCameraFrame(const exocet_mosaic::sim::CameraFrame& f, const exocet_mosaic::sim::CameraModel& c) override {
+  void writeCameraFrame(const exocet_mosaic::dive::CameraFrame& f, const exocet_common::CameraModel& c) override {
     check();
     sink_.writeCameraFrame(f, c);
   }
-  void writeNavOdometry(const exocet_mosaic::sim::PoseRecord& p) override {
+  void writeNavOdometry(const exocet_mosaic::dive::PoseRecord& p) override {
     check();
     sink_.writeNavOdometry(p);
   }
-  void writeDepth(const exocet_mosaic::sim::DepthRecord& d) override {
+  void writeDepth(const exocet_mosaic::dive::DepthRecord& d) override {
     check();
     sink_.writeDepth(d);
   }
-  void writeAltitude(const exocet_mosaic::sim::AltitudeRecord& a) override {
+  void writeAltitude(const exocet_mosaic::dive::AltitudeRecord& a) override {
     check();
     sink_.writeAltitude(a);
   }
@@ -53,23 +53,23 @@ class InterruptibleBagSink final : public exocet_mosaic::sim::DiveRecordSink {
   static void check() {
     if (g_signal != 0) throw Interrupted{g_signal};
   }
-  exocet_mosaic::sim::DiveRecordSinkFor<exocet_mosaic::DiveBagWriter> sink_;
+  exocet_mosaic::dive::DiveRecordSinkFor<exocet_mosaic::DiveBagWriter> sink_;
 };
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  namespace sim = exocet_mosaic::sim;
+  namespace dive = exocet_mosaic::dive;
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   try {
-    const sim::DiveImportOptions options =
-        sim::parseDiveImportArguments(std::vector<std::string>(argv + 1, argv + argc));
+    const dive::DiveImportOptions options =
+        dive::parseDiveImportArguments(std::vector<std::string>(argv + 1, argv + argc));
     if (options.help) {
-      std::cout << sim::diveImportUsage();
+      std::cout << dive::diveImportUsage();
       return 0;
     }
-    const sim::DiveImport dive = sim::prepareDiveImport(options);
+    const dive::DiveImport dive = dive::prepareDiveImport(options);
     for (const auto& warning : dive.warnings) std::cerr << "dive_import: warning: " << warning << "\n";
 
     exocet_mosaic::DiveBagWriter::Options bag_options;
@@ -77,12 +77,12 @@ int main(int argc, char** argv) {
     bag_options.world_frame = dive.navigation.world_frame;
     exocet_mosaic::DiveBagWriter writer(options.output_path, bag_options);
     InterruptibleBagSink sink(&writer);
-    const sim::DiveImportSummary summary = sim::writeDiveImport(dive, &sink);
+    const dive::DiveImportSummary summary = dive::writeDiveImport(dive, &sink);
     writer.commit();
     for (const auto& warning : summary.warnings()) std::cerr << "dive_import: warning: " << warning << "\n";
     std::cout << summary.line(options.output_path) << std::endl;
     return 0;
-  } catch (const sim::DiveImportError& e) {
+  } catch (const dive::DiveImportError& e) {
     std::cerr << "dive_import: error: " << e.what() << "\n";
     return e.exitCode();
   } catch (const Interrupted& interrupted) {

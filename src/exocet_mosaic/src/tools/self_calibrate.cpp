@@ -26,7 +26,7 @@
 #include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/registration/gray_converter.h"
 #include "exocet_mosaic/selfcal/self_calibration.h"
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_common/command_line.h"
 
 namespace {
@@ -203,7 +203,7 @@ int readBag(const Options& o, const std::function<void(const cv::Mat&)>& sink) {
 }
 
 void writeCalibration(const Options& o, const selfcal::SelfCalibrationResult& result) {
-  sim::CameraModel camera;
+  exocet_common::CameraModel camera;
   camera.width = result.image_size.width;
   camera.height = result.image_size.height;
   camera.fx = result.intrinsics.value.alpha_u;
@@ -212,7 +212,7 @@ void writeCalibration(const Options& o, const selfcal::SelfCalibrationResult& re
   camera.cy = result.intrinsics.value.v0;
   // The standard file first (through the project's writer), then our keys appended, then one atomic rename.
   const std::string temporary = exocet_common::temporaryPathFor(o.output) + ".base";
-  sim::saveCameraModelYaml(temporary, camera, o.camera_name);
+  exocet_common::saveCameraModelYaml(temporary, camera, o.camera_name);
   std::ifstream in(temporary);
   std::stringstream text;
   text << in.rdbuf();

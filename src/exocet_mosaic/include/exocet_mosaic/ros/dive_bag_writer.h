@@ -15,8 +15,8 @@
 
 #include <sensor_msgs/CameraInfo.h>
 
-#include "exocet_mosaic/sim/camera_model.h"
-#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_common/camera_model.h"
+#include "exocet_mosaic/dive/dive_records.h"
 
 namespace rosbag {
 class Bag;
@@ -31,7 +31,7 @@ enum class ImageStorage { kRaw, kJpeg, kPng };
 ImageStorage parseImageStorage(const std::string& name);
 
 /// sensor_msgs/CameraInfo of a camera model (plumb_bob), frame camera_optical.
-sensor_msgs::CameraInfo toCameraInfo(const sim::CameraModel& camera, double stamp_s, const std::string& frame_id);
+sensor_msgs::CameraInfo toCameraInfo(const exocet_common::CameraModel& camera, double stamp_s, const std::string& frame_id);
 
 class DiveBagWriter {
  public:
@@ -48,25 +48,25 @@ class DiveBagWriter {
   DiveBagWriter(const DiveBagWriter&) = delete;
   DiveBagWriter& operator=(const DiveBagWriter&) = delete;
 
-  void writeDatum(const sim::GeoReference& datum, double stamp_s);  ///< latched
-  void writeStaticTransforms(const std::vector<sim::StaticTransform>& transforms, double stamp_s);  ///< latched
+  void writeDatum(const exocet_common::GeoReference& datum, double stamp_s);  ///< latched
+  void writeStaticTransforms(const std::vector<dive::StaticTransform>& transforms, double stamp_s);  ///< latched
   /// Image and its camera_info, both stamped at frame.stamp_s. A compressed storage uses frame.compressed if
   /// compressFrame() filled it, otherwise compresses the image here.
-  void writeCameraFrame(const sim::CameraFrame& frame, const sim::CameraModel& camera);
+  void writeCameraFrame(const dive::CameraFrame& frame, const exocet_common::CameraModel& camera);
   /**
    * @brief Compresses frame->image as writeCameraFrame() stores it (JPEG or PNG, per the options) into
    * frame->compressed and frame->compressed_format; does nothing for raw storage. Touches only the frame: call it
    * on the threads that render, so that compression does not queue on the thread that writes.
    * Throws std::runtime_error if the image cannot be encoded.
    */
-  void compressFrame(sim::CameraFrame* frame) const;
-  void writeNavOdometry(const sim::PoseRecord& pose);
-  void writeDvl(const sim::DvlRecord& dvl);
-  void writeImu(const sim::ImuRecord& imu);
-  void writeDepth(const sim::DepthRecord& depth);
-  void writeAltitude(const sim::AltitudeRecord& altitude);
-  void writeUsbl(const sim::FixRecord& fix);  ///< recorded at fix.arrival_s
-  void writeGroundTruth(const sim::PoseRecord& base_link_pose);
+  void compressFrame(dive::CameraFrame* frame) const;
+  void writeNavOdometry(const dive::PoseRecord& pose);
+  void writeDvl(const dive::DvlRecord& dvl);
+  void writeImu(const dive::ImuRecord& imu);
+  void writeDepth(const dive::DepthRecord& depth);
+  void writeAltitude(const dive::AltitudeRecord& altitude);
+  void writeUsbl(const dive::FixRecord& fix);  ///< recorded at fix.arrival_s
+  void writeGroundTruth(const dive::PoseRecord& base_link_pose);
   void writeGroundTruthCamera(double stamp_s, const Eigen::Isometry3d& world_from_camera, double altitude_m);
 
   /// Closes the bag and renames it to its final name. Throws std::runtime_error on failure.

@@ -33,7 +33,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "exocet_mosaic/fusion/fusion_front_end.h"
-#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
 namespace exocet_mosaic {
@@ -98,7 +98,7 @@ class FusionRos {
   /// base_link -> frame from tf (static mounts); empty, with a throttled warning, when tf does not have it.
   std::optional<Eigen::Isometry3d> mountOf(const std::string& frame);
   /// The UTM grid of the dive, choosing it from a latitude/longitude when nothing fixed it yet.
-  const fusion::UtmGrid* gridFor(double latitude_deg, double longitude_deg);
+  const exocet_common::UtmGrid* gridFor(double latitude_deg, double longitude_deg);
   /// The filter has just started (from `source`): the map origin and a log line.
   void onStarted(const std::string& source);
   void initializeFromParameters();
@@ -136,7 +136,7 @@ class FusionRos {
   ros::SteadyTimer diagnostics_timer_, path_timer_;
 
   // Geography.
-  std::optional<fusion::UtmGrid> grid_;
+  std::optional<exocet_common::UtmGrid> grid_;
   std::string grid_source_;
   std::optional<Eigen::Vector2d> map_origin_en_m_;  ///< utm -> map offset (rviz cannot draw UTM-sized floats)
 

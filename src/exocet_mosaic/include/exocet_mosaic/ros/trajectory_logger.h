@@ -37,7 +37,7 @@
 #include <sensor_msgs/NavSatFix.h>
 
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_mosaic/dive/dive_records.h"
 
 namespace exocet_mosaic {
 
@@ -193,7 +193,7 @@ class TrajectoryLogger {
 
   bool have_datum_ = false;
   exocet_msgs::GeoDatum datum_msg_;
-  sim::GeoReference datum_;
+  exocet_common::GeoReference datum_;
   std::deque<PendingFix> pending_fixes_;
   uint64_t fixes_written_unconverted_ = 0;
 

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "exocet_mosaic/sim/camera_model.h"
-#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_common/camera_model.h"
+#include "exocet_mosaic/dive/dive_records.h"
 #include "exocet_mosaic/sim/imaging_config.h"
 #include "exocet_mosaic/sim/navigation_sensors.h"
 #include "exocet_mosaic/sim/seabed_renderer.h"
@@ -22,7 +22,7 @@ namespace sim {
 
 /// The downward camera and how it sits on the vehicle.
 struct CameraRig {
-  CameraModel camera = CameraModel::pal();
+  exocet_common::CameraModel camera = exocet_common::CameraModel::pal();
   double fps = 25.0;
   std::string encoding = "bgr8";
   /// Camera optical centre in base_link (metres): forward, left, up.
@@ -42,7 +42,7 @@ struct DiveSynthesisConfig {
   double start_time_unix_s = 1780300800.0;  ///< 2026-06-01T08:00:00Z
   double duration_s = 0.0;                  ///< 0: the whole trajectory
   double seabed_depth_m = 60.0;             ///< depth of the reference seabed plane
-  GeoReference geo;                         ///< from the origin's latitude/longitude
+  exocet_common::GeoReference geo;                         ///< from the origin's latitude/longitude
   TrajectoryConfig trajectory;
   NavigationSensorConfig navigation;
   ImagingConfig imaging;
@@ -57,7 +57,7 @@ struct DiveSynthesisConfig {
 
 /// One rendered frame with its ground truth.
 struct FrameTruth {
-  CameraFrame frame;
+  dive::CameraFrame frame;
   bool dropped = false;                     ///< the frame was lost: `frame.image` is empty
   VehicleState vehicle;                     ///< local frame
   Eigen::Isometry3d world_from_camera;      ///< UTM frame (E, N, up)
@@ -71,7 +71,7 @@ struct FrameTruth {
  */
 struct DiveSink {
   NavigationSinks navigation;
-  std::function<void(const PoseRecord&)> ground_truth;   ///< base_link in UTM at ground_truth_rate_hz
+  std::function<void(const dive::PoseRecord&)> ground_truth;   ///< base_link in UTM at ground_truth_rate_hz
   std::function<void(const FrameTruth&)> frame;
   std::function<void(int frames_done, int frames_total)> progress;
   /**

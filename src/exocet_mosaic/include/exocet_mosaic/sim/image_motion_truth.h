@@ -8,7 +8,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/seabed_texture.h"
 
 namespace exocet_mosaic {
@@ -18,7 +18,7 @@ namespace sim {
  * @brief The pixel matrix H (x_B ~ H x_A) induced by the reference seabed plane z = 0 of the local frame between two
  * camera poses (local_from_camera). Exact for a flat seabed and a camera without distortion.
  */
-Eigen::Matrix3d seabedPlaneHomography(const CameraModel& camera, const Eigen::Isometry3d& local_from_a,
+Eigen::Matrix3d seabedPlaneHomography(const exocet_common::CameraModel& camera, const Eigen::Isometry3d& local_from_a,
                                       const Eigen::Isometry3d& local_from_b);
 
 /**
@@ -26,7 +26,7 @@ Eigen::Matrix3d seabedPlaneHomography(const CameraModel& camera, const Eigen::Is
  * the seabed (relief included), and the seabed point is projected into B. False if the ray misses the seabed or the
  * point is behind B.
  */
-bool transferThroughSeabed(const CameraModel& camera, const Eigen::Isometry3d& local_from_a,
+bool transferThroughSeabed(const exocet_common::CameraModel& camera, const Eigen::Isometry3d& local_from_a,
                            const Eigen::Isometry3d& local_from_b, const SeabedRelief& relief,
                            const Eigen::Vector2d& pixel_a, Eigen::Vector2d* pixel_b);
 

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_mosaic/dive/dive_records.h"
 #include "exocet_mosaic/sim/random.h"
 #include "exocet_mosaic/sim/vehicle_trajectory.h"
 
@@ -53,12 +53,12 @@ struct NavigationSensorConfig {
 
 /// Callbacks receiving each measurement as it is produced, in time order of measurement.
 struct NavigationSinks {
-  std::function<void(const ImuRecord&)> imu;
-  std::function<void(const DvlRecord&)> dvl;
-  std::function<void(const PoseRecord&)> dead_reckoning;
-  std::function<void(const DepthRecord&)> depth;
-  std::function<void(const AltitudeRecord&)> altitude;
-  std::function<void(const FixRecord&)> usbl;
+  std::function<void(const dive::ImuRecord&)> imu;
+  std::function<void(const dive::DvlRecord&)> dvl;
+  std::function<void(const dive::PoseRecord&)> dead_reckoning;
+  std::function<void(const dive::DepthRecord&)> depth;
+  std::function<void(const dive::AltitudeRecord&)> altitude;
+  std::function<void(const dive::FixRecord&)> usbl;
 };
 
 /**
@@ -68,7 +68,7 @@ struct NavigationSinks {
 class NavigationSensorSimulator {
  public:
   /// `seabed_height` gives the relief above the reference plane at (x, y) for the altimeter (may be empty: flat).
-  NavigationSensorSimulator(const NavigationSensorConfig& config, const GeoReference& geo, double seabed_depth_m,
+  NavigationSensorSimulator(const NavigationSensorConfig& config, const exocet_common::GeoReference& geo, double seabed_depth_m,
                             double start_time_unix_s, uint64_t seed,
                             std::function<double(double, double)> seabed_height = {});
 
@@ -76,7 +76,7 @@ class NavigationSensorSimulator {
   void advanceTo(const VehicleTrajectory& trajectory, double t_s, const NavigationSinks& sinks);
 
   /// Converts a true state to the world (UTM) pose record used for ground truth.
-  PoseRecord groundTruth(const VehicleState& state) const;
+  dive::PoseRecord groundTruth(const VehicleState& state) const;
   /// Current gyro bias (rad/s, body axes): for tests.
   const Eigen::Vector3d& gyroBias() const { return gyro_bias_; }
   /// Current heading error of the dead reckoning (rad): for tests.
@@ -88,7 +88,7 @@ class NavigationSensorSimulator {
   Eigen::Vector3d toWorld(const Eigen::Vector3d& local) const;
 
   NavigationSensorConfig config_;
-  GeoReference geo_;
+  exocet_common::GeoReference geo_;
   double seabed_depth_m_;
   double t0_unix_s_;
   std::function<double(double, double)> seabed_height_;

@@ -11,14 +11,14 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/dive_description.h"
 
 namespace exocet_mosaic {
 namespace sim {
 
 struct RenderedDive {
-  CameraModel camera;
+  exocet_common::CameraModel camera;
   std::vector<cv::Mat> gray;                         ///< CV_8UC1 images (converted from the dive's encoding)
   std::vector<double> stamps_s;                      ///< frame times
   std::vector<Eigen::Isometry3d> local_from_camera;  ///< true camera poses (local frame, seabed plane z = 0)

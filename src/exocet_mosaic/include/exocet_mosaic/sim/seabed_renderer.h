@@ -12,7 +12,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 #include "exocet_mosaic/sim/imaging_config.h"
 #include "exocet_mosaic/sim/seabed_texture.h"
 
@@ -41,7 +41,7 @@ class SeabedRenderer {
    * @param reference_altitude_m nominal altitude: the lamp and attenuation are normalised there (a seabed of
    *        albedo a seen at that altitude in clear water appears with value ~ a in the green channel).
    */
-  SeabedRenderer(const CameraModel& camera, const ImagingConfig& imaging, SeabedTexture* texture,
+  SeabedRenderer(const exocet_common::CameraModel& camera, const ImagingConfig& imaging, SeabedTexture* texture,
                  SeabedRelief* relief, std::vector<Landmark> landmarks, uint64_t seed, double reference_altitude_m);
 
   /**
@@ -63,7 +63,7 @@ class SeabedRenderer {
   /// Converts linear radiance to the camera's encoded output with noise (deterministic in seed and frame).
   cv::Mat encode(const cv::Mat& radiance_rgb, int frame_index, const std::string& encoding) const;
 
-  const CameraModel& camera() const { return camera_; }
+  const exocet_common::CameraModel& camera() const { return camera_; }
   const std::vector<Landmark>& landmarks() const { return landmarks_; }
 
   static bool isSupportedEncoding(const std::string& encoding);
@@ -72,7 +72,7 @@ class SeabedRenderer {
   void addMarineSnow(const Eigen::Isometry3d& world_from_camera, double t_s, const cv::Mat& depth_z_m,
                      cv::Mat* radiance) const;
 
-  CameraModel camera_;
+  exocet_common::CameraModel camera_;
   ImagingConfig imaging_;
   SeabedTexture* texture_;
   SeabedRelief* relief_;

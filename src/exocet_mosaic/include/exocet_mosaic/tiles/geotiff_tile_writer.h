@@ -39,7 +39,7 @@ struct TileWriterConfig {
 };
 
 /// EPSG code of a UTM zone (326zz north / 327zz south) or of UPS (zone 0: 32661 north / 32761 south), the same as
-/// fusion::UtmGrid::epsg(). @throws std::invalid_argument when zone is outside [0, 60].
+/// exocet_common::UtmGrid::epsg(). @throws std::invalid_argument when zone is outside [0, 60].
 int epsgForUtm(int zone, bool northern);
 
 /// Writes TileRaster's as GeoTIFF tiles with consecutive indices in one folder. Not thread-safe: one writer per

@@ -1,4 +1,4 @@
-#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_common/utm_grid.h"
 
 #include <cmath>
 #include <sstream>
@@ -7,8 +7,7 @@
 #include <GeographicLib/Constants.hpp>
 #include <GeographicLib/UTMUPS.hpp>
 
-namespace exocet_mosaic {
-namespace fusion {
+namespace exocet_common {
 namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
@@ -112,5 +111,4 @@ double UtmGrid::scaleFactor(double easting_m, double northing_m) const {
   return k;
 }
 
-}  // namespace fusion
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

@@ -10,8 +10,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
-namespace exocet_mosaic {
-namespace sim {
+namespace exocet_common {
 
 /**
  * @brief Intrinsics of one camera. Pixel (u, v) = (0, 0) is the centre of the top-left pixel (OpenCV).
@@ -54,5 +53,4 @@ CameraModel loadCameraModelYaml(const std::string& path);
 /// Writes the camera_calibration_parsers YAML format (readable by camera_calibration_parsers::readCalibration).
 void saveCameraModelYaml(const std::string& path, const CameraModel& camera, const std::string& camera_name);
 
-}  // namespace sim
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

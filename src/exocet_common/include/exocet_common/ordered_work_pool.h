@@ -18,8 +18,7 @@
 #include <thread>
 #include <vector>
 
-namespace exocet_mosaic {
-namespace sim {
+namespace exocet_common {
 
 template <typename Result>
 class OrderedWorkPool {
@@ -116,5 +115,4 @@ class OrderedWorkPool {
   std::vector<std::thread> workers_;
 };
 
-}  // namespace sim
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

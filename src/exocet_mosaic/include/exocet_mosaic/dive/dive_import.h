@@ -34,11 +34,11 @@
 
 #include <opencv2/videoio.hpp>
 
-#include "exocet_mosaic/sim/camera_model.h"
-#include "exocet_mosaic/sim/dive_records.h"
+#include "exocet_common/camera_model.h"
+#include "exocet_mosaic/dive/dive_records.h"
 
 namespace exocet_mosaic {
-namespace sim {
+namespace dive {
 
 /// A problem met while importing a dive. kInput: bad argument or input file (the tool exits 2); kIo: reading or
 /// writing failed on a file that should have worked (the tool exits 1).
@@ -110,7 +110,7 @@ struct NavigationRow {
 /// The navigation of a dive, read from CSV.
 struct NavigationTable {
   std::string world_frame = "map";  ///< "utm" (geo-referenced, datum valid) or "map" (local)
-  std::optional<GeoReference> datum;  ///< set when world_frame is "utm"
+  std::optional<exocet_common::GeoReference> datum;  ///< set when world_frame is "utm"
   std::vector<NavigationRow> rows;    ///< in file order, times non-decreasing
   std::string time_column;            ///< the column the times came from
   std::string position_columns;       ///< "x,y,z", "x,y,depth", "lat,lon,z" or "lat,lon,depth"
@@ -176,7 +176,7 @@ FrameTimes frameTimesFromRate(const ImageSource& images, double start_time_s, do
 /// the camera's size.
 class FrameReader {
  public:
-  FrameReader(const ImageSource& images, const FrameTimes& times, const CameraModel& camera,
+  FrameReader(const ImageSource& images, const FrameTimes& times, const exocet_common::CameraModel& camera,
               ImageEncoding encoding);
   /// Next frame, stamped; false at the end. Throws DiveImportError naming the file (or frame number) for an
   /// undecodable image, a frame of another size than the camera's (both sizes given) or a frame with no time.
@@ -185,7 +185,7 @@ class FrameReader {
  private:
   const ImageSource& images_;
   const FrameTimes& times_;
-  const CameraModel& camera_;
+  const exocet_common::CameraModel& camera_;
   ImageEncoding encoding_;
   int next_index_ = 0;
   cv::VideoCapture video_;
@@ -194,7 +194,7 @@ class FrameReader {
 /// Everything read and checked before writing, except the pixels.
 struct DiveImport {
   DiveImportOptions options;
-  CameraModel camera;
+  exocet_common::CameraModel camera;
   ImageSource images;
   FrameTimes times;
   NavigationTable navigation;
@@ -210,9 +210,9 @@ DiveImport prepareDiveImport(const DiveImportOptions& options);
 class DiveRecordSink {
  public:
   virtual ~DiveRecordSink() = default;
-  virtual void writeDatum(const GeoReference& datum, double stamp_s) = 0;
+  virtual void writeDatum(const exocet_common::GeoReference& datum, double stamp_s) = 0;
   virtual void writeStaticTransforms(const std::vector<StaticTransform>& transforms, double stamp_s) = 0;
-  virtual void writeCameraFrame(const CameraFrame& frame, const CameraModel& camera) = 0;
+  virtual void writeCameraFrame(const CameraFrame& frame, const exocet_common::CameraModel& camera) = 0;
   virtual void writeNavOdometry(const PoseRecord& pose) = 0;
   virtual void writeDepth(const DepthRecord& depth) = 0;
   virtual void writeAltitude(const AltitudeRecord& altitude) = 0;
@@ -223,11 +223,11 @@ template <typename Writer>
 class DiveRecordSinkFor final : public DiveRecordSink {
  public:
   explicit DiveRecordSinkFor(Writer* writer) : writer_(writer) {}
-  void writeDatum(const GeoReference& datum, double stamp_s) override { writer_->writeDatum(datum, stamp_s); }
+  void writeDatum(const exocet_common::GeoReference& datum, double stamp_s) override { writer_->writeDatum(datum, stamp_s); }
   void writeStaticTransforms(const std::vector<StaticTransform>& transforms, double stamp_s) override {
     writer_->writeStaticTransforms(transforms, stamp_s);
   }
-  void writeCameraFrame(const CameraFrame& frame, const CameraModel& camera) override {
+  void writeCameraFrame(const CameraFrame& frame, const exocet_common::CameraModel& camera) override {
     writer_->writeCameraFrame(frame, camera);
   }
   void writeNavOdometry(const PoseRecord& pose) override { writer_->writeNavOdometry(pose); }
@@ -263,5 +263,5 @@ struct DiveImportSummary {
  */
 DiveImportSummary writeDiveImport(const DiveImport& dive, DiveRecordSink* sink);
 
-}  // namespace sim
+}  // namespace dive
 }  // namespace exocet_mosaic

@@ -1,4 +1,4 @@
-#include "exocet_mosaic/sim/camera_model.h"
+#include "exocet_common/camera_model.h"
 
 #include <cmath>
 #include <fstream>
@@ -11,8 +11,7 @@
 
 #include "exocet_common/atomic_file.h"
 
-namespace exocet_mosaic {
-namespace sim {
+namespace exocet_common {
 
 namespace {
 CameraModel centred(int width, int height, double hfov_deg) {
@@ -166,5 +165,4 @@ void saveCameraModelYaml(const std::string& path, const CameraModel& c, const st
   exocet_common::writeFileAtomically(path, out.str());
 }
 
-}  // namespace sim
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

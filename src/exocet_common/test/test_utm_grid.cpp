@@ -9,9 +9,9 @@
 #include <GeographicLib/UTMUPS.hpp>
 #include <gtest/gtest.h>
 
-#include "exocet_mosaic/fusion/utm_grid.h"
+#include "exocet_common/utm_grid.h"
 
-using exocet_mosaic::fusion::UtmGrid;
+using exocet_common::UtmGrid;
 
 namespace {
 

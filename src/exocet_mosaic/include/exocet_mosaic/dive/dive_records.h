@@ -17,8 +17,10 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include "exocet_common/geo_reference.h"
+
 namespace exocet_mosaic {
-namespace sim {
+namespace dive {
 
 /// One camera image. `image` is 8-bit BGR (CV_8UC3), 8-bit gray (CV_8UC1) or 16-bit gray (CV_16UC1).
 struct CameraFrame {
@@ -91,17 +93,6 @@ struct FixRecord {
   double vertical_sigma_m = 0.0;
 };
 
-/// Geodetic reference of the dive's world frame.
-struct GeoReference {
-  int utm_zone = 31;
-  bool northern_hemisphere = true;
-  int epsg = 32631;
-  double origin_latitude_deg = 0.0;
-  double origin_longitude_deg = 0.0;
-  double origin_easting_m = 0.0;
-  double origin_northing_m = 0.0;
-};
-
 /// Rigid transform between two frames (e.g. base_link -> camera_optical): child pose in the parent frame.
 struct StaticTransform {
   std::string parent_frame;
@@ -109,5 +100,5 @@ struct StaticTransform {
   Eigen::Isometry3d parent_from_child = Eigen::Isometry3d::Identity();
 };
 
-}  // namespace sim
+}  // namespace dive
 }  // namespace exocet_mosaic

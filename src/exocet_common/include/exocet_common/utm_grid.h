@@ -10,8 +10,7 @@
 
 #include <Eigen/Core>
 
-namespace exocet_mosaic {
-namespace fusion {
+namespace exocet_common {
 
 /**
  * @brief A fixed UTM zone and hemisphere, or one UPS pole.
@@ -67,5 +66,4 @@ class UtmGrid {
   bool northern_ = true;
 };
 
-}  // namespace fusion
-}  // namespace exocet_mosaic
+}  // namespace exocet_common

@@ -1,4 +1,4 @@
-#include "exocet_mosaic/sim/dive_import.h"
+#include "exocet_mosaic/dive/dive_import.h"
 
 #include <algorithm>
 #include <cctype>
@@ -26,10 +26,10 @@
 #include "exocet_common/atomic_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/dive_topics.h"
-#include "exocet_mosaic/sim/geo_reference.h"
+#include "exocet_common/geo_reference.h"
 
 namespace exocet_mosaic {
-namespace sim {
+namespace dive {
 
 namespace {
 
@@ -269,10 +269,10 @@ Eigen::Quaterniond fromHeadingNed(double heading_rad, double pitch_rad, double r
 
 /// Grid bearing of true north at a point (radians, clockwise from grid north), by a small step north: measured on
 /// the projection itself, so it cannot disagree with latLonToGrid's sign conventions.
-double gridBearingOfTrueNorth_rad(const GeoReference& datum, double latitude_deg, double longitude_deg) {
+double gridBearingOfTrueNorth_rad(const exocet_common::GeoReference& datum, double latitude_deg, double longitude_deg) {
   const double step_deg = latitude_deg > 89.0 ? -1e-5 : 1e-5;
-  const Eigen::Vector2d a = latLonToGrid(datum, latitude_deg, longitude_deg);
-  const Eigen::Vector2d b = latLonToGrid(datum, latitude_deg + step_deg, longitude_deg);
+  const Eigen::Vector2d a = exocet_common::latLonToGrid(datum, latitude_deg, longitude_deg);
+  const Eigen::Vector2d b = exocet_common::latLonToGrid(datum, latitude_deg + step_deg, longitude_deg);
   const Eigen::Vector2d north = (b - a) * (step_deg > 0 ? 1.0 : -1.0);
   return std::atan2(north.x(), north.y());
 }
@@ -542,10 +542,10 @@ NavigationTable readNavigationCsv(const std::string& path, const std::optional<G
     nav.world_frame = "utm";
     try {
       if (origin) {
-        nav.datum = makeGeoReference(origin->latitude_deg, origin->longitude_deg);
+        nav.datum = exocet_common::makeGeoReference(origin->latitude_deg, origin->longitude_deg);
       } else {
         const CsvRow& first = table.rows.front();
-        nav.datum = makeGeoReference(table.number(first, c_lat), table.number(first, c_lon));
+        nav.datum = exocet_common::makeGeoReference(table.number(first, c_lat), table.number(first, c_lon));
       }
     } catch (const std::invalid_argument& e) {
       failInput((origin ? std::string("--origin-lat/--origin-lon") : table.where(table.rows.front())) + ": " +
@@ -574,7 +574,7 @@ NavigationTable readNavigationCsv(const std::string& path, const std::optional<G
         failInput(table.where(row, c_lat) + ": latitude " + trim(row.fields[c_lat]) + " not within [-90, 90] deg");
       if (lon_deg < -180.0 || lon_deg >= 360.0)
         failInput(table.where(row, c_lon) + ": longitude " + trim(row.fields[c_lon]) + " not within [-180, 360) deg");
-      horizontal = latLonToGrid(*nav.datum, lat_deg, lon_deg);
+      horizontal = exocet_common::latLonToGrid(*nav.datum, lat_deg, lon_deg);
     } else {
       horizontal = Eigen::Vector2d(table.number(row, c_x), table.number(row, c_y));
       if (nav.datum) horizontal += Eigen::Vector2d(nav.datum->origin_easting_m, nav.datum->origin_northing_m);
@@ -627,7 +627,7 @@ NavigationTable readNavigationCsv(const std::string& path, const std::optional<G
         if (nav.datum) {
           // A compass heading is from true north; the utm frame's y axis is grid north.
           if (!geodetic) {
-            const Eigen::Vector2d ll = gridToLatLon(*nav.datum, horizontal.x(), horizontal.y());
+            const Eigen::Vector2d ll = exocet_common::gridToLatLon(*nav.datum, horizontal.x(), horizontal.y());
             lat_deg = ll.x();
             lon_deg = ll.y();
           }
@@ -813,7 +813,7 @@ FrameTimes frameTimesFromRate(const ImageSource& images, double start_time_s, do
   return times;
 }
 
-FrameReader::FrameReader(const ImageSource& images, const FrameTimes& times, const CameraModel& camera,
+FrameReader::FrameReader(const ImageSource& images, const FrameTimes& times, const exocet_common::CameraModel& camera,
                          ImageEncoding encoding)
     : images_(images), times_(times), camera_(camera), encoding_(encoding) {
   if (images_.kind == ImageSource::Kind::kVideo && !video_.open(images_.path))
@@ -865,7 +865,7 @@ DiveImport prepareDiveImport(const DiveImportOptions& options) {
   dive.options = options;
   requireInputFile("--camera", options.camera_path, "camera intrinsics YAML");
   try {
-    dive.camera = loadCameraModelYaml(options.camera_path);
+    dive.camera = exocet_common::loadCameraModelYaml(options.camera_path);
   } catch (const std::runtime_error& e) {
     failInput(std::string("--camera: ") + e.what());
   }
@@ -952,5 +952,5 @@ DiveImportSummary writeDiveImport(const DiveImport& dive, DiveRecordSink* sink) 
   return summary;
 }
 
-}  // namespace sim
+}  // namespace dive
 }  // namespace exocet_mosaic
