@@ -134,7 +134,7 @@ ArmCircleRun runArmCircle(const sim::ArmRigConfig& rig, int servoings, const Arm
     };
     controller.setReference(start.right.image, lookup(start.right));
     control::ImageStep step;
-    sim::ResolvedRate last_rate;
+    arm::ResolvedRate last_rate;
     double step_min_sigma = INFINITY;
     int images = 0;
     for (int it = 0; it < stop.max_images; ++it) {
@@ -156,7 +156,7 @@ ArmCircleRun runArmCircle(const sim::ArmRigConfig& rig, int servoings, const Arm
                         ? "not converged in " + std::to_string(stop.max_images) + " images"
                         : control::toString(step.status)) +
                    " at servoing " + std::to_string(k + 1) + ": " + step.message + text +
-                   "; arm: " + sim::toString(last_rate.status) + " " + last_rate.message;
+                   "; arm: " + arm::toString(last_rate.status) + " " + last_rate.message;
       break;
     }
     run.step_mm.push_back(sim::poseError(arm.worldFromLeft(), target).position_mm);
@@ -200,7 +200,7 @@ ArmSection armSection() {
   ArmSection out;
   const int quarter_servoings = ArmSection::kQuarterServoings, long_check_servoings = 20;
   sim::ArmRigConfig default_rig;
-  const sim::ArmModel arm_model(default_rig.arm);
+  const arm::ArmModel arm_model(default_rig.arm);
   const Eigen::Isometry3d rig_transform = default_rig.rig.leftFromRight();
   out.default_check = trajectory::checkFeasibility(
       arm_model, default_rig.flange_T_left,

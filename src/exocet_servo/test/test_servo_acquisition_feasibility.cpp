@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 #include "exocet_servo/sim/arm_rig_simulator.h"
 #include "exocet_servo/trajectory/acquisition_feasibility.h"
 #include "exocet_servo/trajectory/screw_motion.h"
@@ -31,19 +31,19 @@ struct Drive {
   double min_sigma = 1e9;
   std::vector<double> stop_position_error_m;  ///< camera to pose k at the end of step k
   std::vector<double> stop_rotation_error_rad;
-  std::vector<sim::JointVector> stop_q;
+  std::vector<arm::JointVector> stop_q;
 };
 
 /// Drives the kinematic arm from q0 along P_{k-1} exp(s log(P_{k-1}^-1 P_k)), each step in step_s seconds: feedforward
 /// of the geodesic's constant body twist plus a proportional correction of the camera's pose error, resolved rate
 /// (damped near singularities, velocity scaling, joint-limit stops) and Euler integration, as the simulator does.
-Drive driveResolvedRate(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                        const std::vector<Eigen::Isometry3d>& poses, const sim::JointVector& q0) {
+Drive driveResolvedRate(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                        const std::vector<Eigen::Isometry3d>& poses, const arm::JointVector& q0) {
   const double step_s = 10.0, dt = 0.05, gain = 2.0;
   const int n = static_cast<int>(std::lround(step_s / dt));
-  const Eigen::Matrix<double, 6, 6> ad = sim::adjoint(flange_T_camera);
+  const Eigen::Matrix<double, 6, 6> ad = arm::adjoint(flange_T_camera);
   Drive d;
-  sim::JointVector q = q0;
+  arm::JointVector q = q0;
   for (size_t k = 1; k < poses.size(); ++k) {
     const trajectory::Twist xi = trajectory::logSe3(poses[k - 1].inverse() * poses[k]);
     for (int i = 1; i <= n; ++i) {
@@ -51,13 +51,13 @@ Drive driveResolvedRate(const sim::ArmModel& arm, const Eigen::Isometry3d& flang
       const Eigen::Isometry3d desired = poses[k - 1] * trajectory::expSe3(s * xi);
       const Eigen::Isometry3d current = arm.forward(q) * flange_T_camera;
       const trajectory::Twist twist = xi / step_s + gain * trajectory::logSe3(current.inverse() * desired);
-      const sim::ResolvedRate r = arm.resolvedRate(q, ad * twist, dt);
+      const arm::ResolvedRate r = arm.resolvedRate(q, ad * twist, dt);
       d.min_sigma = std::min(d.min_sigma, r.min_singular_value);
-      if (r.status == sim::ArmStatus::kSingular && d.first_singular_step < 0) {
+      if (r.status == arm::ArmStatus::kSingular && d.first_singular_step < 0) {
         d.first_singular_step = static_cast<int>(k);
         d.first_singular_fraction = s;
       }
-      if (r.status == sim::ArmStatus::kJointLimit && d.first_limit_step < 0) d.first_limit_step = static_cast<int>(k);
+      if (r.status == arm::ArmStatus::kJointLimit && d.first_limit_step < 0) d.first_limit_step = static_cast<int>(k);
       q += r.joint_velocities_rad_s * dt;
     }
     // Settle on the stop (the servo converges there before the next reference).
@@ -75,7 +75,7 @@ Drive driveResolvedRate(const sim::ArmModel& arm, const Eigen::Isometry3d& flang
 }
 
 /// The simulator's default start: the left camera at the default joints, the bench's repeated servoings from there.
-std::vector<Eigen::Isometry3d> defaultCirclePoses(const sim::ArmRigConfig& c, const sim::ArmModel& arm, int steps) {
+std::vector<Eigen::Isometry3d> defaultCirclePoses(const sim::ArmRigConfig& c, const arm::ArmModel& arm, int steps) {
   return trajectory::repeatedServoingPoses(arm.forward(c.q_initial) * c.flange_T_left, c.rig.leftFromRight(), steps);
 }
 
@@ -83,14 +83,14 @@ std::vector<Eigen::Isometry3d> defaultCirclePoses(const sim::ArmRigConfig& c, co
 const trajectory::PlacementResult& defaultSearch() {
   static const trajectory::PlacementResult result = [] {
     const sim::ArmRigConfig c;
-    return trajectory::searchPlacement(sim::ArmModel(c.arm), c.flange_T_left, c.rig.leftFromRight(), c.q_initial);
+    return trajectory::searchPlacement(arm::ArmModel(c.arm), c.flange_T_left, c.rig.leftFromRight(), c.q_initial);
   }();
   return result;
 }
 
 TEST(ServoAcquisitionFeasibility, DefaultPlacementLeavesTheWorkspaceOnTheThirdServoing) {
   const sim::ArmRigConfig c;
-  const sim::ArmModel arm(c.arm);
+  const arm::ArmModel arm(c.arm);
   const std::vector<Eigen::Isometry3d> poses = defaultCirclePoses(c, arm, 5);
   const FeasibilityReport r = trajectory::checkFeasibility(arm, c.flange_T_left, poses, c.q_initial);
   ASSERT_EQ(r.poses.size(), 1u + 5u * 10u);
@@ -122,7 +122,7 @@ TEST(ServoAcquisitionFeasibility, DefaultPlacementLeavesTheWorkspaceOnTheThirdSe
 
 TEST(ServoAcquisitionFeasibility, SearchedPlacementMakesAQuarterCircleFeasible) {
   const sim::ArmRigConfig c;
-  const sim::ArmModel arm(c.arm);
+  const arm::ArmModel arm(c.arm);
   const trajectory::PlacementSearchConfig sc;  // 5 servoings of 18 deg
   const trajectory::PlacementResult& p = defaultSearch();
   ASSERT_TRUE(p.found) << p.message;
@@ -151,7 +151,7 @@ TEST(ServoAcquisitionFeasibility, SearchedPlacementMakesAQuarterCircleFeasible) 
 
 TEST(ServoAcquisitionFeasibility, OutOfReachPlanIsRefusedNamingThePose) {
   const sim::ArmRigConfig c;
-  const sim::ArmModel arm(c.arm);
+  const arm::ArmModel arm(c.arm);
   std::vector<Eigen::Isometry3d> poses = defaultCirclePoses(c, arm, 2);
   // Pose 3 is 1 m further out along x: beyond the 1.22 m reach.
   Eigen::Isometry3d far = poses.back();
@@ -182,7 +182,7 @@ TEST(ServoAcquisitionFeasibility, OutOfReachPlanIsRefusedNamingThePose) {
 
 TEST(ServoAcquisitionFeasibility, VerdictsAgreeWithResolvedRateAlongThePath) {
   const sim::ArmRigConfig c;
-  const sim::ArmModel arm(c.arm);
+  const arm::ArmModel arm(c.arm);
   // Default placement: the resolved rate turns singular on the step the check names, near the same fraction.
   const auto poses = defaultCirclePoses(c, arm, 5);
   const FeasibilityReport r = trajectory::checkFeasibility(arm, c.flange_T_left, poses, c.q_initial);
@@ -238,9 +238,9 @@ TEST(ServoAcquisitionFeasibility, ConfigValidationListsEveryBadField) {
   EXPECT_NE(es.find("x_min_m, x_max_m"), std::string::npos) << es;
   EXPECT_NE(es.find("base_z_m"), std::string::npos) << es;
   EXPECT_NE(es.find("azimuth_samples must be in [1, 3600]"), std::string::npos) << es;
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   EXPECT_THROW(trajectory::searchPlacement(arm, Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity(),
-                                           sim::JointVector::Zero(), s),
+                                           arm::JointVector::Zero(), s),
                std::invalid_argument);
 }
 

@@ -14,7 +14,7 @@
 
 #include "exocet_servo/control/invariant_servo.h"
 #include "exocet_servo/control/servo_safety.h"
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 #include "exocet_servo/sim/arm_rig_simulator.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/trajectory/acquisition_planner.h"
@@ -24,13 +24,13 @@
 namespace {
 
 using namespace exocet_servo;
-using sim::JointVector;
+using arm::JointVector;
 using Vector6 = Eigen::Matrix<double, 6, 1>;
 
 /// Random joint angles within the limits shrunk by `margin` rad.
-JointVector randomJoints(const sim::ArmModel& arm, std::mt19937& rng, double margin) {
+JointVector randomJoints(const arm::ArmModel& arm, std::mt19937& rng, double margin) {
   JointVector q;
-  for (int i = 0; i < sim::kArmJoints; ++i) {
+  for (int i = 0; i < arm::kArmJoints; ++i) {
     q(i) = std::uniform_real_distribution<double>(arm.minLimits()(i) + margin, arm.maxLimits()(i) - margin)(rng);
   }
   return q;
@@ -44,15 +44,15 @@ double rotationDistance(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) 
 }
 
 TEST(ServoArmKinematics, JacobianMatchesFiniteDifferences) {
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   std::mt19937 rng(11);
   const double h = 1e-6;
   for (int k = 0; k < 30; ++k) {
     const JointVector q = randomJoints(arm, rng, 0.0);
-    const sim::ArmJacobian jb = arm.jacobianBase(q);
-    const sim::ArmJacobian jf = arm.jacobianFlange(q);
+    const arm::ArmJacobian jb = arm.jacobianBase(q);
+    const arm::ArmJacobian jf = arm.jacobianFlange(q);
     const Eigen::Isometry3d t = arm.forward(q);
-    for (int i = 0; i < sim::kArmJoints; ++i) {
+    for (int i = 0; i < arm::kArmJoints; ++i) {
       JointVector qp = q, qm = q;
       qp(i) += h;
       qm(i) -= h;
@@ -82,7 +82,7 @@ TEST(ServoArmKinematics, JacobianMatchesFiniteDifferences) {
 }
 
 TEST(ServoArmKinematics, ConfigValidationListsEveryBadField) {
-  sim::ArmModelConfig c = sim::ArmModel::defaultConfig();
+  arm::ArmModelConfig c = arm::ArmModel::defaultConfig();
   EXPECT_EQ(c.validate(), "");
   c.joints[2].min_rad = 1.0;
   c.joints[2].max_rad = 0.5;
@@ -92,11 +92,11 @@ TEST(ServoArmKinematics, ConfigValidationListsEveryBadField) {
   EXPECT_NE(e.find("joints[2].min_rad, max_rad"), std::string::npos) << e;
   EXPECT_NE(e.find("joints[4].max_velocity_rad_s must be in (0, 100]"), std::string::npos) << e;
   EXPECT_NE(e.find("singular_threshold must be in (0, 1]"), std::string::npos) << e;
-  EXPECT_THROW(sim::ArmModel{c}, std::invalid_argument);
+  EXPECT_THROW(arm::ArmModel{c}, std::invalid_argument);
 }
 
 TEST(ServoArmIk, ForwardInverseRoundTripOnRandomReachablePoses) {
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   const sim::ArmRigConfig rig;
   std::mt19937 rng(5);
   trajectory::IkConfig near_seed;
@@ -105,7 +105,7 @@ TEST(ServoArmIk, ForwardInverseRoundTripOnRandomReachablePoses) {
   for (int k = 0; k < 200; ++k) {
     const JointVector q = randomJoints(arm, rng, 0.05);
     JointVector seed = q;
-    for (int i = 0; i < sim::kArmJoints; ++i) seed(i) += std::uniform_real_distribution<double>(-0.3, 0.3)(rng);
+    for (int i = 0; i < arm::kArmJoints; ++i) seed(i) += std::uniform_real_distribution<double>(-0.3, 0.3)(rng);
     const Eigen::Isometry3d target = arm.forward(q);
     const trajectory::IkResult r = trajectory::solveFlangeIk(arm, target, seed, near_seed);
     ASSERT_EQ(r.status, trajectory::IkStatus::kConverged) << k << ": " << r.message;
@@ -141,7 +141,7 @@ TEST(ServoArmIk, ForwardInverseRoundTripOnRandomReachablePoses) {
 }
 
 TEST(ServoArmIk, UnreachableAndOutOfLimitTargetsAreRefused) {
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   const JointVector seed = sim::ArmRigConfig::defaultJointAngles();
   // 3 m away: beyond the reach bound, refused without iterating.
   Eigen::Isometry3d far = arm.forward(seed);
@@ -164,10 +164,10 @@ TEST(ServoArmIk, UnreachableAndOutOfLimitTargetsAreRefused) {
   EXPECT_GT(rs.position_residual_m, 0.02);
 
   // A yaw that only exists beyond joint 1's limits: kJointLimits naming joint 1.
-  sim::ArmModelConfig narrow = sim::ArmModel::defaultConfig();
+  arm::ArmModelConfig narrow = arm::ArmModel::defaultConfig();
   narrow.joints[0].min_rad = -0.5;
   narrow.joints[0].max_rad = 0.5;
-  const sim::ArmModel narrow_arm(narrow);
+  const arm::ArmModel narrow_arm(narrow);
   JointVector q = seed;
   q(0) = 1.0;
   const trajectory::IkResult rl = trajectory::solveFlangeIk(narrow_arm, arm.forward(q), seed);
@@ -177,14 +177,14 @@ TEST(ServoArmIk, UnreachableAndOutOfLimitTargetsAreRefused) {
 }
 
 TEST(ServoArmResolvedRate, KeepsTheTwistDirectionAndRespectsVelocityLimits) {
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   const JointVector q = sim::ArmRigConfig::defaultJointAngles();
-  const sim::ArmJacobian j = arm.jacobianFlange(q);
+  const arm::ArmJacobian j = arm.jacobianFlange(q);
   // A slow twist is executed exactly.
   Vector6 slow;
   slow << 0.01, -0.02, 0.015, 0.02, -0.01, 0.03;
-  const sim::ResolvedRate rs = arm.resolvedRate(q, slow, 0.1);
-  EXPECT_EQ(rs.status, sim::ArmStatus::kOk) << rs.message;
+  const arm::ResolvedRate rs = arm.resolvedRate(q, slow, 0.1);
+  EXPECT_EQ(rs.status, arm::ArmStatus::kOk) << rs.message;
   EXPECT_LT((j * rs.joint_velocities_rad_s - slow).norm(), 1e-12);
   EXPECT_DOUBLE_EQ(rs.scale, 1.0);
   // A fast one is scaled uniformly: the same direction, every joint within its limit, one of them on it.
@@ -192,8 +192,8 @@ TEST(ServoArmResolvedRate, KeepsTheTwistDirectionAndRespectsVelocityLimits) {
   for (int k = 0; k < 50; ++k) {
     Vector6 fast;
     for (int i = 0; i < 6; ++i) fast(i) = std::uniform_real_distribution<double>(-1.0, 1.0)(rng);
-    const sim::ResolvedRate r = arm.resolvedRate(q, fast, 0.05);
-    ASSERT_EQ(r.status, sim::ArmStatus::kVelocityScaled) << k << ": " << r.message;
+    const arm::ResolvedRate r = arm.resolvedRate(q, fast, 0.05);
+    ASSERT_EQ(r.status, arm::ArmStatus::kVelocityScaled) << k << ": " << r.message;
     EXPECT_LT(r.scale, 1.0);
     const Vector6 achieved = j * r.joint_velocities_rad_s;
     EXPECT_LT((achieved - r.scale * fast).norm(), 1e-9 * fast.norm()) << k;
@@ -206,36 +206,36 @@ TEST(ServoArmResolvedRate, KeepsTheTwistDirectionAndRespectsVelocityLimits) {
   // Near a singularity (wrist pitch 0: forearm and flange roll axes aligned) the solution is damped and says so.
   JointVector qs = q;
   qs(4) = 1e-4;
-  const sim::ResolvedRate rsing = arm.resolvedRate(qs, slow, 0.1);
-  EXPECT_EQ(rsing.status, sim::ArmStatus::kSingular) << rsing.message;
+  const arm::ResolvedRate rsing = arm.resolvedRate(qs, slow, 0.1);
+  EXPECT_EQ(rsing.status, arm::ArmStatus::kSingular) << rsing.message;
   EXPECT_LT(rsing.min_singular_value, arm.config().singular_threshold);
   EXPECT_TRUE(rsing.joint_velocities_rad_s.allFinite());
   EXPECT_LE(rsing.joint_velocities_rad_s.cwiseAbs().cwiseQuotient(arm.maxVelocities()).maxCoeff(), 1.0 + 1e-12);
   // Corrupt input: no motion.
   Vector6 bad = slow;
   bad(2) = std::nan("");
-  const sim::ResolvedRate rb = arm.resolvedRate(q, bad, 0.1);
-  EXPECT_EQ(rb.status, sim::ArmStatus::kInvalidInput);
+  const arm::ResolvedRate rb = arm.resolvedRate(q, bad, 0.1);
+  EXPECT_EQ(rb.status, arm::ArmStatus::kInvalidInput);
   EXPECT_TRUE(rb.joint_velocities_rad_s.isZero());
 }
 
 TEST(ServoArmResolvedRate, AJointDrivenIntoItsLimitStopsTheMotionNamingIt) {
-  const sim::ArmModel arm(sim::ArmModel::defaultConfig());
+  const arm::ArmModel arm(arm::ArmModel::defaultConfig());
   JointVector q = sim::ArmRigConfig::defaultJointAngles();
   const double dt = 0.1;
   // The flange twist that turns the wrist pitch alone, towards its lower limit (-135 deg), re-evaluated each step.
   int steps = 0;
-  sim::ResolvedRate r;
+  arm::ResolvedRate r;
   for (; steps < 200; ++steps) {
     JointVector unit = JointVector::Zero();
     unit(4) = -0.8;
     r = arm.resolvedRate(q, arm.jacobianFlange(q) * unit, dt);
-    if (r.status == sim::ArmStatus::kJointLimit) break;
-    ASSERT_TRUE(r.status == sim::ArmStatus::kOk) << r.message;
+    if (r.status == arm::ArmStatus::kJointLimit) break;
+    ASSERT_TRUE(r.status == arm::ArmStatus::kOk) << r.message;
     q += r.joint_velocities_rad_s * dt;
     ASSERT_GE(q(4), arm.minLimits()(4)) << "crossed the limit";
   }
-  ASSERT_EQ(r.status, sim::ArmStatus::kJointLimit);
+  ASSERT_EQ(r.status, arm::ArmStatus::kJointLimit);
   EXPECT_EQ(r.limiting_joint, 4);
   EXPECT_TRUE(r.joint_velocities_rad_s.isZero());
   EXPECT_NE(r.message.find("joint 5 (wrist pitch) would cross its lower limit -2.3562 rad (-135.0 deg)"),
@@ -248,7 +248,7 @@ TEST(ServoArmResolvedRate, AJointDrivenIntoItsLimitStopsTheMotionNamingIt) {
   // Moving away from the limit is allowed again.
   JointVector away = JointVector::Zero();
   away(4) = 0.5;
-  EXPECT_NE(arm.resolvedRate(q, arm.jacobianFlange(q) * away, dt).status, sim::ArmStatus::kJointLimit);
+  EXPECT_NE(arm.resolvedRate(q, arm.jacobianFlange(q) * away, dt).status, arm::ArmStatus::kJointLimit);
 }
 
 TEST(ServoArmRig, CommandsMoveTheLeftCameraAndBothCamerasSeeTheVent) {
@@ -264,8 +264,8 @@ TEST(ServoArmRig, CommandsMoveTheLeftCameraAndBothCamerasSeeTheVent) {
   twist << 0.02, -0.01, 0.03, 0.05, -0.04, 0.02;
   for (double dt : {0.02, 0.01}) {
     sim.setJointPositions(c.q_initial);
-    const sim::ResolvedRate r = sim.command(twist, dt);
-    EXPECT_EQ(r.status, sim::ArmStatus::kOk) << r.message;
+    const arm::ResolvedRate r = sim.command(twist, dt);
+    EXPECT_EQ(r.status, arm::ArmStatus::kOk) << r.message;
     const Eigen::Isometry3d predicted = start * trajectory::expSe3(twist * dt);
     EXPECT_LT(positionDistance(sim.worldFromLeft(), predicted), 0.5 * dt * dt) << dt;
     EXPECT_LT(rotationDistance(sim.worldFromLeft(), predicted), 2.0 * dt * dt) << dt;
@@ -323,10 +323,10 @@ TEST(ServoArmPlan, JointTargetsOfTheAcquisitionPlanExecutedOpenLoopReachEachPose
     // Open loop: straight joint-space motion at the velocity limits, no camera feedback.
     bool arrived = false;
     for (int step = 0; step < 1000 && !arrived; ++step, ++total_steps) {
-      sim::ArmStatus status = sim::ArmStatus::kOk;
+      arm::ArmStatus status = arm::ArmStatus::kOk;
       std::string message;
       arrived = sim.stepTowards(targets[i].q, dt, &status, &message);
-      ASSERT_TRUE(status == sim::ArmStatus::kOk || status == sim::ArmStatus::kVelocityScaled) << message;
+      ASSERT_TRUE(status == arm::ArmStatus::kOk || status == arm::ArmStatus::kVelocityScaled) << message;
       EXPECT_LE(sim.jointVelocities().cwiseAbs().cwiseQuotient(sim.arm().maxVelocities()).maxCoeff(), 1.0 + 1e-12);
       ASSERT_TRUE(sim.arm().withinLimits(sim.jointPositions(), 1e-12));
     }
@@ -364,10 +364,10 @@ TEST(ServoArmPlan, JointTargetsOfTheAcquisitionPlanExecutedOpenLoopReachEachPose
   const JointVector before = sim.jointPositions();
   JointVector outside = before;
   outside(1) = 3.0;
-  sim::ArmStatus status = sim::ArmStatus::kOk;
+  arm::ArmStatus status = arm::ArmStatus::kOk;
   std::string message;
   EXPECT_FALSE(sim.stepTowards(outside, dt, &status, &message));
-  EXPECT_EQ(status, sim::ArmStatus::kJointLimit);
+  EXPECT_EQ(status, arm::ArmStatus::kJointLimit);
   EXPECT_NE(message.find("joint 2 (shoulder pitch)"), std::string::npos) << message;
   EXPECT_EQ(sim.jointPositions(), before);
 }
@@ -422,8 +422,8 @@ TEST(ServoArmLoop, InvariantServoThroughTheArmReachesTheRightCameraPose) {
     const sim::Projection cur = sim::project(c.left_camera, sim.worldFromLeft(), points);
     step = servo.step(cur.points_px, c.left_camera.k, cur.depths_m);
     if (step.status != control::ServoStatus::kRunning) break;
-    const sim::ResolvedRate r = sim.command(step.velocity, dt);
-    scaled += r.status == sim::ArmStatus::kVelocityScaled;
+    const arm::ResolvedRate r = sim.command(step.velocity, dt);
+    scaled += r.status == arm::ArmStatus::kVelocityScaled;
     control::SafetyInput in;
     in.tracked_points = visiblePoints(c.left_camera, cur);
     in.error_norm = step.error_norm;
@@ -462,8 +462,8 @@ TEST(ServoArmLoop, TurningAwayFromTheVentStopsOnLostTracking) {
     in.error_norm = 0.1;
     in.camera_position_m = sim.worldFromLeft().translation();
     if (safety.update(in) != control::SafetyStatus::kOk) break;
-    const sim::ResolvedRate r = sim.command(twist, 0.1);
-    ASSERT_NE(r.status, sim::ArmStatus::kJointLimit) << r.message;
+    const arm::ResolvedRate r = sim.command(twist, 0.1);
+    ASSERT_NE(r.status, arm::ArmStatus::kJointLimit) << r.message;
   }
   EXPECT_EQ(safety.status(), control::SafetyStatus::kLostTracking) << safety.message();
   EXPECT_LT(last_visible, 20);

@@ -50,8 +50,8 @@ TEST(ServoArmImageLoop, LeftCameraReachesTheRightCamerasPoseThroughTheArm) {
       std::printf("it %d: %s |e| %.5f points %d, pose error %.2f mm %.3f deg\n", it,
                   control::toString(step.status).c_str(), step.error_norm, step.points, e.position_mm, e.rotation_deg);
     if (step.status != control::ImageStepStatus::kRunning) break;
-    const sim::ResolvedRate r = sim.command(control::limitTwist(step.velocity, 0.3, 1.0), dt);
-    ASSERT_NE(r.status, sim::ArmStatus::kJointLimit) << r.message;
+    const arm::ResolvedRate r = sim.command(control::limitTwist(step.velocity, 0.3, 1.0), dt);
+    ASSERT_NE(r.status, arm::ArmStatus::kJointLimit) << r.message;
   }
   ASSERT_EQ(step.status, control::ImageStepStatus::kConverged) << step.message;
   const sim::PoseError e = sim::poseError(sim.worldFromLeft(), goal);

@@ -40,9 +40,9 @@ TEST(ServoSafety, NormalConvergingSequenceNeverStops) {
     in.tracked_points = 80 - it / 10;  // tracks lost slowly: 51 left at the end
     in.error_norm = std::max(1e-4, 0.5 * std::exp(-0.05 * it)) * wobble(rng);
     in.camera_position_m = Eigen::Vector3d(0.4 + 0.3 * it / 300.0, 0.1 * std::sin(0.05 * it), 0.05);
-    in.arm_status = it % 7 == 0 ? sim::ArmStatus::kVelocityScaled : sim::ArmStatus::kOk;
+    in.arm_status = it % 7 == 0 ? arm::ArmStatus::kVelocityScaled : arm::ArmStatus::kOk;
     // A singular warning does not stop by default (the arm damps the motion).
-    if (it == 150) in.arm_status = sim::ArmStatus::kSingular;
+    if (it == 150) in.arm_status = arm::ArmStatus::kSingular;
     ASSERT_EQ(monitor.update(in), SafetyStatus::kOk) << "iteration " << it << ": " << monitor.message();
   }
   EXPECT_FALSE(monitor.stopped());
@@ -151,7 +151,7 @@ TEST(ServoSafety, ArmJointLimitStopsQuotingTheArm) {
   ServoSafetyMonitor monitor{ServoSafetyConfig()};
   EXPECT_EQ(monitor.update(healthy(0.3)), SafetyStatus::kOk);
   SafetyInput in = healthy(0.2);
-  in.arm_status = sim::ArmStatus::kJointLimit;
+  in.arm_status = arm::ArmStatus::kJointLimit;
   in.arm_message = "joint 5 (wrist pitch) would cross its lower limit -2.3562 rad (-135.0 deg) within 0.1 s";
   EXPECT_EQ(monitor.update(in), SafetyStatus::kJointLimit);
   EXPECT_EQ(monitor.message(),
@@ -164,7 +164,7 @@ TEST(ServoSafety, SingularStopsOnlyWhenAsked) {
   config.stop_on_singular = true;
   ServoSafetyMonitor monitor(config);
   SafetyInput in = healthy(0.2);
-  in.arm_status = sim::ArmStatus::kSingular;
+  in.arm_status = arm::ArmStatus::kSingular;
   in.arm_message = "near a singularity";
   EXPECT_EQ(monitor.update(in), SafetyStatus::kSingular);
   EXPECT_TRUE(contains(monitor.message(), "singular: near a singularity")) << monitor.message();
@@ -198,7 +198,7 @@ TEST(ServoSafety, StopsLatchUntilResetAndBadInputStops) {
   EXPECT_TRUE(contains(monitor.message(), "error_norm finite")) << monitor.message();
   monitor.reset();
   SafetyInput refused = healthy(0.05);
-  refused.arm_status = sim::ArmStatus::kInvalidInput;
+  refused.arm_status = arm::ArmStatus::kInvalidInput;
   EXPECT_EQ(monitor.update(refused), SafetyStatus::kInvalidInput);
 }
 

@@ -82,13 +82,13 @@ SafetyStatus ServoSafetyMonitor::update(const SafetyInput& in) {
       << ", " << in.error_norm << ", (" << in.camera_position_m.transpose() << "))";
     return stop(SafetyStatus::kInvalidInput, m.str());
   }
-  if (in.arm_status == sim::ArmStatus::kInvalidInput) {
+  if (in.arm_status == arm::ArmStatus::kInvalidInput) {
     return stop(SafetyStatus::kInvalidInput, "the arm refused the command (" + in.arm_message + ")");
   }
-  if (in.arm_status == sim::ArmStatus::kJointLimit) {
+  if (in.arm_status == arm::ArmStatus::kJointLimit) {
     return stop(SafetyStatus::kJointLimit, in.arm_message.empty() ? "a joint reached its limit" : in.arm_message);
   }
-  if (in.arm_status == sim::ArmStatus::kSingular && config_.stop_on_singular) {
+  if (in.arm_status == arm::ArmStatus::kSingular && config_.stop_on_singular) {
     return stop(SafetyStatus::kSingular, in.arm_message.empty() ? "the arm is near a singularity" : in.arm_message);
   }
   // Workspace: the box, then the sphere.

@@ -144,9 +144,9 @@ void ArmRigSimulatorRos::onTick(const ros::TimerEvent&) {
       }
     }
   }
-  const sim::ResolvedRate rate = sim_->command(twist, dt_s);
-  if (rate.status == sim::ArmStatus::kJointLimit || rate.status == sim::ArmStatus::kInvalidInput)
-    ROS_WARN_THROTTLE(5.0, "arm_rig_simulator: %s: %s", sim::toString(rate.status).c_str(), rate.message.c_str());
+  const arm::ResolvedRate rate = sim_->command(twist, dt_s);
+  if (rate.status == arm::ArmStatus::kJointLimit || rate.status == arm::ArmStatus::kInvalidInput)
+    ROS_WARN_THROTTLE(5.0, "arm_rig_simulator: %s: %s", arm::toString(rate.status).c_str(), rate.message.c_str());
   last_status_ = rate.status;
   last_message_ = rate.message;
   if (!twist.isZero()) last_motion_stamp_ = stamp;  // (read on this thread only)
@@ -182,7 +182,7 @@ void ArmRigSimulatorRos::publishViews(const ros::Time& stamp) {
           right_info_pub_);
   sensor_msgs::JointState joints;
   joints.header.stamp = stamp;
-  for (int j = 0; j < sim::kArmJoints; ++j) {
+  for (int j = 0; j < arm::kArmJoints; ++j) {
     joints.name.push_back("joint_" + std::to_string(j + 1));
     joints.position.push_back(sim_->jointPositions()[j]);
     joints.velocity.push_back(sim_->jointVelocities()[j]);
@@ -193,15 +193,15 @@ void ArmRigSimulatorRos::publishViews(const ros::Time& stamp) {
 
 void ArmRigSimulatorRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   using diagnostic_msgs::DiagnosticStatus;
-  const bool stopped = last_status_ == sim::ArmStatus::kJointLimit || last_status_ == sim::ArmStatus::kInvalidInput;
+  const bool stopped = last_status_ == arm::ArmStatus::kJointLimit || last_status_ == arm::ArmStatus::kInvalidInput;
   status.summary(stopped ? DiagnosticStatus::WARN : DiagnosticStatus::OK,
-                 sim::toString(last_status_) + (last_message_.empty() ? "" : ": " + last_message_));
+                 arm::toString(last_status_) + (last_message_.empty() ? "" : ": " + last_message_));
   std::lock_guard<std::mutex> lock(mutex_);
   status.add("commands", commands_);
   status.add("rejected commands", rejected_commands_);
   status.add("late commands", late_commands_);
   status.add("command age (s)", have_command_ ? (ros::Time::now() - command_stamp_).toSec() : -1.0);
-  for (int j = 0; j < sim::kArmJoints; ++j)
+  for (int j = 0; j < arm::kArmJoints; ++j)
     status.add("joint " + std::to_string(j + 1) + " (rad)", sim_->jointPositions()[j]);
 }
 

@@ -14,7 +14,7 @@
 
 #include "exocet_common/ros/parameter_reader.h"
 #include "exocet_servo/control/twist_limit.h"
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 #include "exocet_servo/vision/depth_lookup.h"
 
 namespace exocet_servo {
@@ -81,8 +81,8 @@ std::string fixed(double value, int decimals = 3) {
 
 JointSafetyConfig JointSafetyConfig::simulatedArm() {
   JointSafetyConfig c;
-  const sim::ArmModelConfig arm = sim::ArmModel::defaultConfig();
-  for (int j = 0; j < sim::kArmJoints; ++j) {
+  const arm::ArmModelConfig arm = arm::ArmModel::defaultConfig();
+  for (int j = 0; j < arm::kArmJoints; ++j) {
     c.names.push_back("joint_" + std::to_string(j + 1));  // the simulator's names
     c.min_rad.push_back(arm.joints[j].min_rad);
     c.max_rad.push_back(arm.joints[j].max_rad);
@@ -473,7 +473,7 @@ std::string ServoRos::checkSafety(const ros::Time& stamp) {
     }
     const std::string joints = checkJointState(config_.joints, *checked);
     if (!joints.empty()) {
-      in.arm_status = sim::ArmStatus::kJointLimit;
+      in.arm_status = arm::ArmStatus::kJointLimit;
       in.arm_message = joints;
     }
   }

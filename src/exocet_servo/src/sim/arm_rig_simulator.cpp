@@ -8,9 +8,9 @@
 namespace exocet_servo {
 namespace sim {
 
-JointVector ArmRigConfig::defaultJointAngles() {
+arm::JointVector ArmRigConfig::defaultJointAngles() {
   // Solved once with trajectory::solveCameraIk (the best-conditioned elbow-up solution); to 1e-10 rad.
-  JointVector q;
+  arm::JointVector q;
   q << -0.2914567945, -0.3036736148, 0.7075826540, -0.3153647979, -1.9567479010, 1.4485933150;
   return q;
 }
@@ -41,47 +41,47 @@ std::string ArmRigConfig::validate() const {
 }
 
 ArmRigSimulator::ArmRigSimulator(const ArmRigConfig& config)
-    : config_(config), arm_(config.arm.validate().empty() ? config.arm : ArmModel::defaultConfig()) {
+    : config_(config), arm_(config.arm.validate().empty() ? config.arm : arm::ArmModel::defaultConfig()) {
   const std::string errors = config.validate();
   if (!errors.empty()) throw std::invalid_argument("ArmRigConfig: " + errors);
   std::string why;
   if (!arm_.withinLimits(config.q_initial, 0.0, &why)) throw std::invalid_argument("ArmRigConfig: q_initial: " + why);
   renderer_ = std::make_unique<VentRenderer>(config.scene);
   left_T_right_ = config.rig.leftFromRight();
-  flange_ad_left_ = adjoint(config.flange_T_left);
+  flange_ad_left_ = arm::adjoint(config.flange_T_left);
   q_ = config.q_initial;
 }
 
-ResolvedRate ArmRigSimulator::command(const Eigen::Matrix<double, 6, 1>& twist_left, double dt_s) {
+arm::ResolvedRate ArmRigSimulator::command(const Eigen::Matrix<double, 6, 1>& twist_left, double dt_s) {
   // The same rigid motion seen from the flange: v_f = R v_c + t x (R omega_c), omega_f = R omega_c.
   const Eigen::Matrix<double, 6, 1> twist_flange = flange_ad_left_ * twist_left;
-  ResolvedRate r = arm_.resolvedRate(q_, twist_flange, dt_s);
+  arm::ResolvedRate r = arm_.resolvedRate(q_, twist_flange, dt_s);
   dq_ = r.joint_velocities_rad_s;
-  if (r.status != ArmStatus::kJointLimit && r.status != ArmStatus::kInvalidInput) q_ += dq_ * dt_s;
+  if (r.status != arm::ArmStatus::kJointLimit && r.status != arm::ArmStatus::kInvalidInput) q_ += dq_ * dt_s;
   return r;
 }
 
-bool ArmRigSimulator::stepTowards(const JointVector& q_target, double dt_s, ArmStatus* status, std::string* message) {
-  auto report = [&](ArmStatus s, const std::string& m) {
+bool ArmRigSimulator::stepTowards(const arm::JointVector& q_target, double dt_s, arm::ArmStatus* status, std::string* message) {
+  auto report = [&](arm::ArmStatus s, const std::string& m) {
     if (status != nullptr) *status = s;
     if (message != nullptr) *message = m;
   };
   dq_.setZero();
   if (!q_target.allFinite() || !(dt_s > 0.0)) {
-    report(ArmStatus::kInvalidInput, "invalid input: q_target must be finite and dt_s > 0");
+    report(arm::ArmStatus::kInvalidInput, "invalid input: q_target must be finite and dt_s > 0");
     return false;
   }
   std::string why;
   if (!arm_.withinLimits(q_target, 1e-12, &why)) {
-    report(ArmStatus::kJointLimit, "target refused: " + why);
+    report(arm::ArmStatus::kJointLimit, "target refused: " + why);
     return false;
   }
-  const JointVector delta = q_target - q_;
+  const arm::JointVector delta = q_target - q_;
   // Uniform scale: every joint arrives at the same time (straight line in joint space).
   double scale = 1.0;
   int limiting = -1;
-  const JointVector vmax = arm_.maxVelocities();
-  for (int i = 0; i < kArmJoints; ++i) {
+  const arm::JointVector vmax = arm_.maxVelocities();
+  for (int i = 0; i < arm::kArmJoints; ++i) {
     const double need = std::abs(delta(i)) / dt_s;
     if (need > vmax(i) && vmax(i) / need < scale) {
       scale = vmax(i) / need;
@@ -94,15 +94,15 @@ bool ArmRigSimulator::stepTowards(const JointVector& q_target, double dt_s, ArmS
     std::ostringstream m;
     m << "joint " << (limiting + 1) << " (" << arm_.config().joints[limiting].name << ") at its velocity limit "
       << vmax(limiting) << " rad/s";
-    report(ArmStatus::kVelocityScaled, m.str());
+    report(arm::ArmStatus::kVelocityScaled, m.str());
     return false;
   }
   q_ = q_target;  // exact arrival, no rounding residue
-  report(ArmStatus::kOk, "");
+  report(arm::ArmStatus::kOk, "");
   return true;
 }
 
-void ArmRigSimulator::setJointPositions(const JointVector& q) {
+void ArmRigSimulator::setJointPositions(const arm::JointVector& q) {
   std::string why;
   if (!q.allFinite() || !arm_.withinLimits(q, 1e-12, &why)) {
     throw std::invalid_argument("ArmRigSimulator::setJointPositions: " + (why.empty() ? "q must be finite" : why));
@@ -111,7 +111,7 @@ void ArmRigSimulator::setJointPositions(const JointVector& q) {
   dq_.setZero();
 }
 
-Eigen::Isometry3d ArmRigSimulator::worldFromLeftAt(const JointVector& q) const {
+Eigen::Isometry3d ArmRigSimulator::worldFromLeftAt(const arm::JointVector& q) const {
   return arm_.forward(q) * config_.flange_T_left;
 }
 

@@ -24,7 +24,7 @@ void check(std::ostringstream& errors, bool ok, const std::string& field, const 
   errors << field << " must be in " << range;
 }
 
-std::string jointLabel(const sim::ArmModel& arm, int i) {
+std::string jointLabel(const arm::ArmModel& arm, int i) {
   return "joint " + std::to_string(i + 1) + " (" + arm.config().joints[i].name + ")";
 }
 
@@ -43,11 +43,11 @@ std::string whereLabel(const PoseFeasibility& p, int pose_count) {
 }
 
 /// Fills margin, sigma and the verdict of a solved pose.
-void assess(const sim::ArmModel& arm, const FeasibilityConfig& config, const sim::JointVector* previous_q,
+void assess(const arm::ArmModel& arm, const FeasibilityConfig& config, const arm::JointVector* previous_q,
             PoseFeasibility* p) {
-  const sim::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
+  const arm::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
   p->joint_margin_rad = 1e9;
-  for (int i = 0; i < sim::kArmJoints; ++i) {
+  for (int i = 0; i < arm::kArmJoints; ++i) {
     const double m = std::min(p->q(i) - lo(i), hi(i) - p->q(i));
     if (m < p->joint_margin_rad) {
       p->joint_margin_rad = m;
@@ -55,7 +55,7 @@ void assess(const sim::ArmModel& arm, const FeasibilityConfig& config, const sim
     }
   }
   const Eigen::JacobiSVD<Eigen::Matrix<double, 6, 6>> svd(arm.jacobianBase(p->q), Eigen::ComputeFullV);
-  p->sigma_min = svd.singularValues()(sim::kArmJoints - 1);
+  p->sigma_min = svd.singularValues()(arm::kArmJoints - 1);
   p->joint_step_rad = previous_q != nullptr ? (p->q - *previous_q).cwiseAbs().maxCoeff() : 0.0;
   if (!p->reachable) {
     p->verdict = PoseVerdict::kUnreachable;
@@ -77,7 +77,7 @@ void assess(const sim::ArmModel& arm, const FeasibilityConfig& config, const sim
       << ", " << hi(j) << "], less than min_joint_margin_rad " << config.min_joint_margin_rad;
   } else if (p->sigma_min < config.min_sigma) {
     // The right singular vector of sigma_min says which joints lose a direction (4 and 6 aligned: the wrist).
-    const Eigen::Matrix<double, 6, 1> v = svd.matrixV().col(sim::kArmJoints - 1).cwiseAbs();
+    const Eigen::Matrix<double, 6, 1> v = svd.matrixV().col(arm::kArmJoints - 1).cwiseAbs();
     int a = 0, b = 0;
     v.maxCoeff(&a);
     Eigen::Matrix<double, 6, 1> rest = v;
@@ -132,8 +132,8 @@ std::vector<Eigen::Isometry3d> repeatedServoingPoses(const Eigen::Isometry3d& ba
   return poses;
 }
 
-FeasibilityReport checkFeasibility(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                                   const std::vector<Eigen::Isometry3d>& poses, const sim::JointVector& seed,
+FeasibilityReport checkFeasibility(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                                   const std::vector<Eigen::Isometry3d>& poses, const arm::JointVector& seed,
                                    const FeasibilityConfig& config) {
   const std::string errors = config.validate();
   if (!errors.empty()) throw std::invalid_argument("FeasibilityConfig: " + errors);
@@ -148,7 +148,7 @@ FeasibilityReport checkFeasibility(const sim::ArmModel& arm, const Eigen::Isomet
   IkConfig path_ik = config.ik;
   path_ik.max_restart_distance_rad = config.max_joint_step_rad;
 
-  sim::JointVector q_prev = seed;
+  arm::JointVector q_prev = seed;
   bool have_prev = false;  // q_prev is a solved pose (else the seed)
   int failing_step = -1;
   auto add = [&](int step, double fraction, const Eigen::Isometry3d& target) {
@@ -232,8 +232,8 @@ std::string PlacementSearchConfig::validate() const {
   return e.str();
 }
 
-PlacementResult searchPlacement(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                                const Eigen::Isometry3d& left_T_right, const sim::JointVector& q_reference,
+PlacementResult searchPlacement(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                                const Eigen::Isometry3d& left_T_right, const arm::JointVector& q_reference,
                                 const PlacementSearchConfig& config) {
   const std::string errors = config.validate();
   if (!errors.empty()) throw std::invalid_argument("PlacementSearchConfig: " + errors);
@@ -269,7 +269,7 @@ PlacementResult searchPlacement(const sim::ArmModel& arm, const Eigen::Isometry3
           ++best.solved_candidates;
           // The arm is symmetric about joint 1: turning the reference by the camera's bearing change keeps its
           // elbow and wrist configuration as the seed of the first pose.
-          sim::JointVector seed = q_reference;
+          arm::JointVector seed = q_reference;
           const double bearing = std::atan2(start.translation().y(), start.translation().x());
           seed(0) = std::remainder(q_reference(0) + bearing - reference_bearing, 2.0 * M_PI);
           seed = arm.clampToLimits(seed);

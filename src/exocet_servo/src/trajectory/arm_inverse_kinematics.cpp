@@ -30,12 +30,12 @@ Vector6 poseError(const Eigen::Isometry3d& target, const Eigen::Isometry3d& curr
 }
 
 /// One Levenberg-Marquardt attempt from q0 (already within the limits).
-IkResult solveOnce(const sim::ArmModel& arm, const Eigen::Isometry3d& target, const sim::JointVector& q0,
+IkResult solveOnce(const arm::ArmModel& arm, const Eigen::Isometry3d& target, const arm::JointVector& q0,
                    const IkConfig& config) {
-  const sim::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
+  const arm::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
   IkResult r;
   r.attempts = 1;
-  sim::JointVector q = q0;
+  arm::JointVector q = q0;
   Vector6 e = poseError(target, arm.forward(q));
   double cost = e.squaredNorm();
   double lambda = config.initial_damping;
@@ -55,14 +55,14 @@ IkResult solveOnce(const sim::ArmModel& arm, const Eigen::Isometry3d& target, co
       cost_window_start = cost;
     }
     ++r.iterations;
-    const sim::ArmJacobian j = arm.jacobianBase(q);
+    const arm::ArmJacobian j = arm.jacobianBase(q);
     const Eigen::Matrix<double, 6, 6> jtj = j.transpose() * j;
-    const sim::JointVector g = j.transpose() * e;
+    const arm::JointVector g = j.transpose() * e;
     bool accepted = false;
     while (lambda < 1e10) {
-      const sim::JointVector dq = (jtj + lambda * Eigen::Matrix<double, 6, 6>::Identity()).ldlt().solve(g);
+      const arm::JointVector dq = (jtj + lambda * Eigen::Matrix<double, 6, 6>::Identity()).ldlt().solve(g);
       // Projection on the limits: the joints stay physical at every iterate.
-      const sim::JointVector q_new = (q + dq).cwiseMax(lo).cwiseMin(hi);
+      const arm::JointVector q_new = (q + dq).cwiseMax(lo).cwiseMin(hi);
       const Vector6 e_new = poseError(target, arm.forward(q_new));
       const double cost_new = e_new.squaredNorm();
       if (cost_new < cost) {
@@ -93,9 +93,9 @@ IkResult solveOnce(const sim::ArmModel& arm, const Eigen::Isometry3d& target, co
     << " rad after " << r.iterations << " iterations";
   // On a limit when the gradient of the cost pushes a joint sitting on it outwards (checked on a budget stop too: the
   // projected steps can creep along a limit without stalling).
-  const sim::JointVector g = arm.jacobianBase(q).transpose() * e;  // descent direction of the cost
+  const arm::JointVector g = arm.jacobianBase(q).transpose() * e;  // descent direction of the cost
   std::vector<int> blocked;
-  for (int i = 0; i < sim::kArmJoints; ++i) {
+  for (int i = 0; i < arm::kArmJoints; ++i) {
     const double tol = 1e-9;
     if ((q(i) >= hi(i) - tol && g(i) > 0.0) || (q(i) <= lo(i) + tol && g(i) < 0.0)) blocked.push_back(i);
   }
@@ -155,7 +155,7 @@ std::string toString(IkStatus status) {
   return "unknown";
 }
 
-IkResult solveFlangeIk(const sim::ArmModel& arm, const Eigen::Isometry3d& target, const sim::JointVector& seed,
+IkResult solveFlangeIk(const arm::ArmModel& arm, const Eigen::Isometry3d& target, const arm::JointVector& seed,
                        const IkConfig& config) {
   const std::string errors = config.validate();
   if (!errors.empty()) throw std::invalid_argument("IkConfig: " + errors);
@@ -179,26 +179,26 @@ IkResult solveFlangeIk(const sim::ArmModel& arm, const Eigen::Isometry3d& target
     best.rotation_residual_rad = rotationAngleRad(target.linear() * f.linear().transpose());
     return best;
   }
-  const sim::JointVector q0 = arm.clampToLimits(seed);
+  const arm::JointVector q0 = arm.clampToLimits(seed);
   best = solveOnce(arm, target, q0, config);
   if (best.status == IkStatus::kConverged || config.restarts == 0) return best;
 
   // Restarts: deterministic seeds within the limits, nearest to the caller's seed first (keeps the configuration).
   std::mt19937 rng(config.restart_seed);
-  std::vector<sim::JointVector> seeds;
-  const sim::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
+  std::vector<arm::JointVector> seeds;
+  const arm::JointVector lo = arm.minLimits(), hi = arm.maxLimits();
   for (int k = 0; k < config.restarts; ++k) {
-    sim::JointVector s;
-    for (int i = 0; i < sim::kArmJoints; ++i) s(i) = std::uniform_real_distribution<double>(lo(i), hi(i))(rng);
+    arm::JointVector s;
+    for (int i = 0; i < arm::kArmJoints; ++i) s(i) = std::uniform_real_distribution<double>(lo(i), hi(i))(rng);
     // Alternate full-range seeds with seeds near q0 (a local perturbation often suffices).
     if (k % 2 == 0) s = (q0 + 0.25 * (s - q0)).eval();
     seeds.push_back(s);
   }
-  std::stable_sort(seeds.begin(), seeds.end(), [&q0](const sim::JointVector& a, const sim::JointVector& b) {
+  std::stable_sort(seeds.begin(), seeds.end(), [&q0](const arm::JointVector& a, const arm::JointVector& b) {
     return (a - q0).cwiseAbs().maxCoeff() < (b - q0).cwiseAbs().maxCoeff();
   });
   int iterations = best.iterations, attempts = 1;
-  for (const sim::JointVector& s : seeds) {
+  for (const arm::JointVector& s : seeds) {
     if (config.max_restart_distance_rad > 0.0 && (s - q0).cwiseAbs().maxCoeff() > config.max_restart_distance_rad) {
       continue;
     }
@@ -214,18 +214,18 @@ IkResult solveFlangeIk(const sim::ArmModel& arm, const Eigen::Isometry3d& target
   return best;
 }
 
-IkResult solveCameraIk(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                       const Eigen::Isometry3d& base_T_camera_target, const sim::JointVector& seed,
+IkResult solveCameraIk(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                       const Eigen::Isometry3d& base_T_camera_target, const arm::JointVector& seed,
                        const IkConfig& config) {
   return solveFlangeIk(arm, base_T_camera_target * flange_T_camera.inverse(), seed, config);
 }
 
-std::vector<IkResult> planJointTargets(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+std::vector<IkResult> planJointTargets(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
                                        const std::vector<Eigen::Isometry3d>& base_T_camera_poses,
-                                       const sim::JointVector& q0, const IkConfig& config) {
+                                       const arm::JointVector& q0, const IkConfig& config) {
   std::vector<IkResult> results;
   results.reserve(base_T_camera_poses.size());
-  sim::JointVector seed = q0;
+  arm::JointVector seed = q0;
   for (size_t i = 0; i < base_T_camera_poses.size(); ++i) {
     IkResult r = solveCameraIk(arm, flange_T_camera, base_T_camera_poses[i], seed, config);
     if (r.status == IkStatus::kConverged) {

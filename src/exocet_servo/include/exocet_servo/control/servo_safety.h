@@ -14,7 +14,7 @@
 
 #include <Eigen/Core>
 
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 
 namespace exocet_servo {
 namespace control {
@@ -64,7 +64,7 @@ struct SafetyInput {
   int tracked_points = 0;   ///< points the tracker still follows (matched with the reference)
   double error_norm = 0.0;  ///< the task error |e| of the servo law
   Eigen::Vector3d camera_position_m = Eigen::Vector3d::Zero();  ///< controlled camera centre (world)
-  sim::ArmStatus arm_status = sim::ArmStatus::kOk;              ///< of the last motion command
+  arm::ArmStatus arm_status = arm::ArmStatus::kOk;              ///< of the last motion command
   std::string arm_message;                                      ///< its text (quoted in the stop message)
 };
 

@@ -77,7 +77,7 @@ class ArmRigSimulatorRos {
   /// Commands computed from an image older than the arm's last motion: the servo acted on an image that did not show
   /// its previous command (a late loop), and the arm moves twice for one error.
   long late_commands_ = 0;
-  sim::ArmStatus last_status_ = sim::ArmStatus::kOk;
+  arm::ArmStatus last_status_ = arm::ArmStatus::kOk;
   std::string last_message_;
   /// Commands are taken on their own thread, as an arm controller does, not behind the rendering of the tick: a
   /// command sent before a tick's stamp is in that tick's motion.

@@ -22,7 +22,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 #include "exocet_servo/sim/point_scene.h"
 #include "exocet_servo/sim/vent_renderer.h"
 #include "exocet_servo/trajectory/rig_geometry.h"
@@ -32,7 +32,7 @@ namespace sim {
 
 /// The arm, the rig and the scene; validate() lists the allowed ranges.
 struct ArmRigConfig {
-  ArmModelConfig arm = ArmModel::defaultConfig();
+  arm::ArmModelConfig arm = arm::ArmModel::defaultConfig();
   /// Left camera on the flange: camera axes = flange axes (optical axis = flange z), the rig's centre on the flange
   /// axis: the left camera half a baseline to the left (-x) and 0.08 m ahead of the flange.
   Eigen::Isometry3d flange_T_left = Eigen::Translation3d(-0.15, 0.0, 0.08) * Eigen::Isometry3d::Identity();
@@ -48,10 +48,10 @@ struct ArmRigConfig {
     s.base_m = Eigen::Vector3d(1.3, 0.0, -0.2);
     return s;
   }();
-  JointVector q_initial = defaultJointAngles();
+  arm::JointVector q_initial = defaultJointAngles();
   /// Joint angles of the default start: left camera at lookAt((0.7, 0, -0.05), (1.3, 0, -0.05)) with the default
   /// flange_T_left, elbow up (0.3 rad or more from every joint limit, smallest singular value of J 0.30).
-  static JointVector defaultJointAngles();
+  static arm::JointVector defaultJointAngles();
   /// "" or every bad field with its allowed range ("; "-joined).
   std::string validate() const;
 };
@@ -72,42 +72,42 @@ class ArmRigSimulator {
   /// Moves the left camera with the twist (v [m/s], omega [rad/s]) in its own frame for dt_s: converted to the flange
   /// body twist (adjoint of flange_T_left), resolved rate, then q += dq dt. On kJointLimit or kInvalidInput the arm
   /// does not move. The returned joint velocities are those applied.
-  ResolvedRate command(const Eigen::Matrix<double, 6, 1>& twist_left, double dt_s);
+  arm::ResolvedRate command(const Eigen::Matrix<double, 6, 1>& twist_left, double dt_s);
 
   /// Open-loop joint motion towards q_target for dt_s: every joint at most at its velocity limit, all scaled by the
   /// same factor so that they arrive together (a straight line in joint space). kJointLimit (no motion) when the
   /// target is outside the limits; kVelocityScaled while limited by a velocity.
   /// @return true once q equals q_target.
-  bool stepTowards(const JointVector& q_target, double dt_s, ArmStatus* status = nullptr,
+  bool stepTowards(const arm::JointVector& q_target, double dt_s, arm::ArmStatus* status = nullptr,
                    std::string* message = nullptr);
 
   /// Sets the joint angles (teleport; velocities zeroed). @throws std::invalid_argument outside the limits.
-  void setJointPositions(const JointVector& q);
+  void setJointPositions(const arm::JointVector& q);
 
-  const JointVector& jointPositions() const { return q_; }
-  const JointVector& jointVelocities() const { return dq_; }  ///< last applied, rad/s
+  const arm::JointVector& jointPositions() const { return q_; }
+  const arm::JointVector& jointVelocities() const { return dq_; }  ///< last applied, rad/s
   Eigen::Isometry3d worldFromFlange() const { return arm_.forward(q_); }
   Eigen::Isometry3d worldFromLeft() const;
   Eigen::Isometry3d worldFromRight() const;
   /// Pose of the left camera at arbitrary joint angles (same model).
-  Eigen::Isometry3d worldFromLeftAt(const JointVector& q) const;
+  Eigen::Isometry3d worldFromLeftAt(const arm::JointVector& q) const;
 
   /// Renders both cameras at the current joint angles.
   StereoViews render() const;
 
-  const ArmModel& arm() const { return arm_; }
+  const arm::ArmModel& arm() const { return arm_; }
   const VentRenderer& renderer() const { return *renderer_; }
   const ArmRigConfig& config() const { return config_; }
   Eigen::Isometry3d leftFromRight() const { return left_T_right_; }
 
  private:
   ArmRigConfig config_;
-  ArmModel arm_;
+  arm::ArmModel arm_;
   std::unique_ptr<VentRenderer> renderer_;
   Eigen::Isometry3d left_T_right_;
   Eigen::Matrix<double, 6, 6> flange_ad_left_;  ///< twist in the left frame -> flange body twist
-  JointVector q_;
-  JointVector dq_ = JointVector::Zero();
+  arm::JointVector q_;
+  arm::JointVector dq_ = arm::JointVector::Zero();
 };
 
 }  // namespace sim

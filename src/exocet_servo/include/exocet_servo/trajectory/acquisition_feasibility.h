@@ -19,7 +19,7 @@
 
 #include <Eigen/Geometry>
 
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 #include "exocet_servo/trajectory/arm_inverse_kinematics.h"
 
 namespace exocet_servo {
@@ -72,7 +72,7 @@ struct PoseFeasibility {
   Eigen::Isometry3d base_T_camera = Eigen::Isometry3d::Identity();  ///< the camera pose checked
   IkStatus ik_status = IkStatus::kUnreachable;
   bool reachable = false;                         ///< ik_status == kConverged
-  sim::JointVector q = sim::JointVector::Zero();  ///< the solution (the best attempt when unreachable)
+  arm::JointVector q = arm::JointVector::Zero();  ///< the solution (the best attempt when unreachable)
   double joint_margin_rad = 0.0;                  ///< smallest distance of a joint to its limits
   int margin_joint = -1;                          ///< that joint, 0-based
   double sigma_min = 0.0;                         ///< smallest singular value of the Jacobian at q
@@ -105,9 +105,9 @@ struct FeasibilityReport {
 /// @param seed joint angles to start the first solve from (e.g. the arm's current joints; the first pose's branch
 ///        is the nearest converged one).
 /// @throws std::invalid_argument when config.validate() is not empty.
-FeasibilityReport checkFeasibility(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+FeasibilityReport checkFeasibility(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
                                    const std::vector<Eigen::Isometry3d>& base_T_camera_poses,
-                                   const sim::JointVector& seed, const FeasibilityConfig& config = FeasibilityConfig());
+                                   const arm::JointVector& seed, const FeasibilityConfig& config = FeasibilityConfig());
 
 /// The repeated-servoing poses left_0 (left_T_right)^k, k = 0 .. servoings.
 std::vector<Eigen::Isometry3d> repeatedServoingPoses(const Eigen::Isometry3d& base_T_left_0,
@@ -151,7 +151,7 @@ struct PlacementResult {
   Eigen::Vector3d axis_base_m = Eigen::Vector3d::Zero();  ///< where the object's axis base should be (base frame)
   double start_azimuth_rad = 0.0;                         ///< of the left camera around the axis, from world x
   Eigen::Isometry3d base_T_left_start = Eigen::Isometry3d::Identity();
-  sim::JointVector q_start = sim::JointVector::Zero();  ///< joints at the start pose (the arm's q_initial)
+  arm::JointVector q_start = arm::JointVector::Zero();  ///< joints at the start pose (the arm's q_initial)
   FeasibilityReport report;                             ///< of the chosen placement over `servoings`
   int candidates = 0;         ///< (x, y, z, azimuth) combinations on the grid, min_axis_distance_m away from the arm
   int solved_candidates = 0;  ///< those that reached the inverse kinematics
@@ -171,8 +171,8 @@ struct PlacementResult {
 /// (sim::ArmModel::reachBoundM()) are skipped before any inverse kinematics. About 3-7 s with the defaults (24192
 /// candidates) on one core.
 /// @throws std::invalid_argument when config.validate() is not empty.
-PlacementResult searchPlacement(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                                const Eigen::Isometry3d& left_T_right, const sim::JointVector& q_reference,
+PlacementResult searchPlacement(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                                const Eigen::Isometry3d& left_T_right, const arm::JointVector& q_reference,
                                 const PlacementSearchConfig& config = PlacementSearchConfig());
 
 }  // namespace trajectory

@@ -13,7 +13,7 @@
 
 #include <Eigen/Geometry>
 
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 
 namespace exocet_servo {
 namespace trajectory {
@@ -47,7 +47,7 @@ std::string toString(IkStatus status);
 struct IkResult {
   IkStatus status = IkStatus::kUnreachable;
   std::string message;                            ///< why it failed ("" when converged)
-  sim::JointVector q = sim::JointVector::Zero();  ///< best joint angles found (within the limits)
+  arm::JointVector q = arm::JointVector::Zero();  ///< best joint angles found (within the limits)
   double position_residual_m = 0.0;               ///< |p_target - p(q)| of the flange
   double rotation_residual_rad = 0.0;             ///< angle of R_target R(q)^T
   int iterations = 0;                             ///< over every attempt
@@ -55,13 +55,13 @@ struct IkResult {
 };
 
 /// Inverse kinematics of a flange pose (base frame) from a seed q (clamped into the limits).
-IkResult solveFlangeIk(const sim::ArmModel& arm, const Eigen::Isometry3d& base_T_flange_target,
-                       const sim::JointVector& seed, const IkConfig& config = IkConfig());
+IkResult solveFlangeIk(const arm::ArmModel& arm, const Eigen::Isometry3d& base_T_flange_target,
+                       const arm::JointVector& seed, const IkConfig& config = IkConfig());
 
 /// Inverse kinematics of a camera pose (base frame) for a camera fixed on the flange at flange_T_camera; the residuals
 /// are those of the flange (the same rotation, positions differ by the lever arm).
-IkResult solveCameraIk(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
-                       const Eigen::Isometry3d& base_T_camera_target, const sim::JointVector& seed,
+IkResult solveCameraIk(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+                       const Eigen::Isometry3d& base_T_camera_target, const arm::JointVector& seed,
                        const IkConfig& config = IkConfig());
 
 /// Joint targets of a sequence of acquisition poses (the pre-programmed alternative, executed open loop): each solved
@@ -69,9 +69,9 @@ IkResult solveCameraIk(const sim::ArmModel& arm, const Eigen::Isometry3d& flange
 /// @param config IK parameters; restarts (nearest seeds first) are allowed for every pose.
 /// @return one IkResult per pose (check each status); after a failure the next pose is seeded from the last
 ///         converged q.
-std::vector<IkResult> planJointTargets(const sim::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
+std::vector<IkResult> planJointTargets(const arm::ArmModel& arm, const Eigen::Isometry3d& flange_T_camera,
                                        const std::vector<Eigen::Isometry3d>& base_T_camera_poses,
-                                       const sim::JointVector& q0, const IkConfig& config = IkConfig());
+                                       const arm::JointVector& q0, const IkConfig& config = IkConfig());
 
 }  // namespace trajectory
 }  // namespace exocet_servo

@@ -18,7 +18,7 @@
 #include <Eigen/Geometry>
 
 namespace exocet_servo {
-namespace sim {
+namespace arm {
 
 constexpr int kArmJoints = 6;
 using JointVector = Eigen::Matrix<double, kArmJoints, 1>;  ///< one value per joint (rad, rad/s)
@@ -123,5 +123,5 @@ class ArmModel {
 /// Adjoint matrix Ad(a_T_b) mapping a twist in frame b to the same rigid motion's twist in frame a (v first).
 Eigen::Matrix<double, 6, 6> adjoint(const Eigen::Isometry3d& a_T_b);
 
-}  // namespace sim
+}  // namespace arm
 }  // namespace exocet_servo

@@ -1,4 +1,4 @@
-#include "exocet_servo/sim/arm_kinematics.h"
+#include "exocet_servo/arm/arm_kinematics.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,7 +11,7 @@
 #include "exocet_servo/trajectory/se3.h"
 
 namespace exocet_servo {
-namespace sim {
+namespace arm {
 
 namespace {
 
@@ -262,5 +262,5 @@ Eigen::Matrix<double, 6, 6> adjoint(const Eigen::Isometry3d& a_T_b) {
   return ad;
 }
 
-}  // namespace sim
+}  // namespace arm
 }  // namespace exocet_servo
