@@ -29,6 +29,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/fusion/cross_pass_smoother.h"
 #include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/fusion/metric_motion.h"
@@ -98,7 +99,8 @@ bool getVector(std::istream& in, std::vector<T>* v) {
 
 /// Plain-old-data copies of the records (Eigen members are trivially copyable; the rest are doubles).
 void writeCache(const std::string& path, const CapturedDive& d) {
-  const std::string temporary = path + ".partial";
+  // A cache is an optimisation: when it cannot be written the next run renders again.
+  const std::string temporary = exocet_common::temporaryPathFor(path);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
     put(out, kCacheMagic);
@@ -124,8 +126,12 @@ void writeCache(const std::string& path, const CapturedDive& d) {
       return;
     }
   }
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
+  try {
+    exocet_common::commitTemporaryFile(temporary, path);
+  } catch (const std::runtime_error&) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+  }
 }
 
 bool readCache(const std::string& path, CapturedDive* d) {

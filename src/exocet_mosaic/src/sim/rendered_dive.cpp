@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 
 namespace exocet_mosaic {
@@ -89,7 +90,8 @@ bool readCache(const std::string& path, RenderedDive* dive) {
 }
 
 void writeCache(const std::string& path, const RenderedDive& dive) {
-  const std::string temporary = path + ".partial";
+  // A cache is an optimisation: when it cannot be written the next run renders again.
+  const std::string temporary = exocet_common::temporaryPathFor(path);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
     put(out, kCacheMagic);
@@ -111,8 +113,12 @@ void writeCache(const std::string& path, const RenderedDive& dive) {
       return;
     }
   }
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
+  try {
+    exocet_common::commitTemporaryFile(temporary, path);
+  } catch (const std::runtime_error&) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+  }
 }
 
 }  // namespace
