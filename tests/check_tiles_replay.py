@@ -185,7 +185,7 @@ class TilesReplayTest(unittest.TestCase):
         """Every display of launch/exocet.rviz has its topic published by the chain; the ground-truth path follows
         the ground truth."""
         here = os.path.dirname(os.path.abspath(__file__))
-        view = yaml.safe_load(open(os.path.join(here, '..', 'launch', 'exocet.rviz')))
+        view = yaml.safe_load(open(os.path.join(here, '..', 'src', 'exocet_mosaic', 'launch', 'exocet.rviz')))
         self.assertIsNotNone(published, 'the chain published fused poses while the bag played')
         wanted = []
         for display in view['Visualization Manager']['Displays']:

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Renders sample dives of config/dives/ into bags/ with the project's simulator: the ones named as arguments
-# (e.g. sample_out_and_back), or every config/dives/sample_*.yaml.
+# Renders sample dives of src/exocet_mosaic/config/dives/ into bags/ with the project's simulator: the ones named as arguments
+# (e.g. sample_out_and_back), or every src/exocet_mosaic/config/dives/sample_*.yaml.
 # A bag is remade only when its description or the simulator changed (the bag is deterministic, so this is safe).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,9 +10,9 @@ synth=devel/lib/exocet_mosaic/dive_synth
 mkdir -p bags
 configs=()
 if [[ $# -gt 0 ]]; then
-  for name in "$@"; do configs+=("config/dives/$name.yaml"); done
+  for name in "$@"; do configs+=("src/exocet_mosaic/config/dives/$name.yaml"); done
 else
-  configs=(config/dives/sample_*.yaml)
+  configs=(src/exocet_mosaic/config/dives/sample_*.yaml)
 fi
 for config in "${configs[@]}"; do
   [[ -f $config ]] || { echo "make-bags: no dive description $config" >&2; exit 1; }
@@ -21,7 +21,8 @@ for config in "${configs[@]}"; do
   # What makes the bag: the description, the simulator library and the sources of the bag writing (dive_synth itself
   # is relinked whenever any node's code changes, which does not change the bag).
   fresh=1
-  for input in $config devel/lib/libexocet_mosaic_sim.so src/exocet_mosaic/src/tools/dive_synth.cpp \
+  for input in $config devel/lib/libexocet_mosaic_sim.so devel/lib/libexocet_mosaic_dive.so devel/lib/libexocet_common.so \
+      src/exocet_mosaic/src/tools/dive_synth.cpp \
       src/exocet_mosaic/src/ros/dive_bag_writer.cpp src/exocet_mosaic/include/exocet_mosaic/ros/dive_bag_writer.h \
       src/exocet_mosaic/src/ros/synthetic_dive_bag.cpp; do
     [[ $bag -nt $input ]] || fresh=0

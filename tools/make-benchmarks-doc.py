@@ -60,7 +60,7 @@ BENCHMARKS = {
         'measures': 'Accuracy, robustness, covariance consistency and speed of the registration methods (KLT, RMR, '
                     'auto) of `exocet_mosaic`, beside two OpenCV pipelines; agreement with a SIFT reference on real '
                     'seabed images; memory and throughput of `registration_node` as a process.',
-        'data': 'Simulated: `config/dives/bench_registration.yaml`, 2000 PAL frames (720x576, 25 frames/s, 80 s) '
+        'data': 'Simulated: `src/exocet_mosaic/config/dives/bench_registration.yaml`, 2000 PAL frames (720x576, 25 frames/s, 80 s) '
                 'over a flat seabed at 2.5 m altitude (altitude varying by 0.3 m), an out-and-back line with a '
                 'U-turn, roll and pitch oscillating by 2 degrees, lamp cone, vignetting, colour attenuation, '
                 'backscatter, read and shot noise, marine snow (20 particles per cubic metre), a turbid stretch '
@@ -92,7 +92,7 @@ BENCHMARKS = {
             'with the load; the CPU rate much less.',
             'Sparus: every consecutive pair registered (homography) and compared, by the same corner distance, with '
             'a SIFT + RANSAC (MAGSAC++) homography of the same pair.',
-            'Node: `registration_node` with `config/registration/pal_survey.yaml` on a private ROS master; the '
+            'Node: `registration_node` with `src/exocet_mosaic/config/registration/pal_survey.yaml` on a private ROS master; the '
             'bag\'s compressed images played at `node_replay_rate` times real time; peak resident memory (VmHWM) '
             'and motions published per second, JPEG decoding included.',
         ],
@@ -100,7 +100,7 @@ BENCHMARKS = {
             'KLT at least 400 frames/s on PAL and 150 on HD; RMR at least 100 and 30 (one thread).',
             'Median error at most 0.1 px, p95 at most 0.5 px, gross failures at most 0.5 % (homography model).',
             'The similarity and affine models cannot meet them on this dive: a rolling and pitching camera sees '
-            'perspective, which only the homography holds. The mosaic chain (`launch/mosaic_chain.launch`) '
+            'perspective, which only the homography holds. The mosaic chain (`src/exocet_mosaic/launch/mosaic_chain.launch`) '
             'registers with the homography for that reason.',
         ],
         'figures': [
@@ -132,7 +132,7 @@ BENCHMARKS = {
         'measures': 'Position accuracy and consistency of the navigation filter (image motion, dead reckoning, USBL) '
                     'and of its Rauch-Tung-Striebel smoother, against each source alone: the out-and-back '
                     'experiment of the 2D3 report\'s figure 5.',
-        'data': '`config/dives/bench_fusion.yaml`: a 50 m line flown out and back at 0.4 m/s over a flat seabed, '
+        'data': '`src/exocet_mosaic/config/dives/bench_fusion.yaml`: a 50 m line flown out and back at 0.4 m/s over a flat seabed, '
                 'PAL camera at 5 frames/s, 2.5 m altitude (varying by 0.15 m), roll and pitch oscillating by 1 and '
                 '1.5 degrees; USBL fixes of 0.5 m (1-sigma) at 1 Hz arriving 1.5 s late, 3 % outliers (10 times the '
                 'noise) and a 40 s dropout on the way back (180-220 s); dead reckoning from gyro and DVL with the '
@@ -285,12 +285,12 @@ BENCHMARKS = {
         'command': 'devel/lib/exocet_mosaic/bench_tiles --output-dir out/bench [--dives pal,hd] [--pal-rate R] '
                    '[--hd-rate R] [--attempts N]',
         'measures': 'Throughput, latency and memory of the live chain (registration_node -> fusion_node -> '
-                    'tile_writer_node, as `launch/replay.launch` runs it) on a replayed dive, and the geometric '
+                    'tile_writer_node, as `src/exocet_mosaic/launch/replay.launch` runs it) on a replayed dive, and the geometric '
                     'quality of the GeoTIFF tiles it writes, before and after `adjust_tiles`.',
         'data': 'Two simulated dives with surveyed checker targets (0.3 m), JPEG images, USBL 0.5 m at 1 Hz '
-                'arriving 1.5 s late. PAL: `config/dives/bench_tiles_pal.yaml`, about 67 s at 25 frames/s, a '
+                'arriving 1.5 s late. PAL: `src/exocet_mosaic/config/dives/bench_tiles_pal.yaml`, about 67 s at 25 frames/s, a '
                 '3-line lawnmower (8 m lines 1.6 m apart, so that tiles of one line overlap tiles of the next), 2.5 m '
-                'altitude, ten targets; presets `pal_survey`. HD: `config/dives/bench_tiles_hd.yaml`, about 33 s of '
+                'altitude, ten targets; presets `pal_survey`. HD: `src/exocet_mosaic/config/dives/bench_tiles_hd.yaml`, about 33 s of '
                 '1920x1080 at 25 frames/s, a 3 m line out and back, six targets; presets `hd_survey`.',
         'method': [
             'The dive is replayed with `rosbag play` at the goal\'s rate (8x real time for PAL, 2x for HD) on a '

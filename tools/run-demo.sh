@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The demo (make demo): replays the sample dive bag on sim time through the Exocet nodes (launch/demo.launch), then
+# The demo (make demo): replays the sample dive bag on sim time through the Exocet nodes (exocet_mosaic's launch/demo.launch), then
 # plots its trajectories. Everything goes under out/demo/; the script ends by itself and lists what it wrote.
 #
 # Environment (all optional):
@@ -61,7 +61,7 @@ printf 'run-demo: replaying %s (%.0f s of dive at %sx real time, about %.0f s)\n
   "$(python3 -c "print($duration_s / $rate)")"
 status=0
 timeout --signal=INT --kill-after=30 "$limit_s" \
-  roslaunch "${port_args[@]}" launch/demo.launch bag:="$bag" output_dir:="$out" rate:="$rate" > "$log" 2>&1 ||
+  roslaunch "${port_args[@]}" src/exocet_mosaic/launch/demo.launch bag:="$bag" output_dir:="$out" rate:="$rate" > "$log" 2>&1 ||
   status=$?
 if [[ $status -ne 0 ]]; then
   [[ $status -eq 124 ]] && echo "run-demo: the replay did not end within $limit_s s and was stopped" >&2

@@ -26,7 +26,7 @@ inline std::string directoryFromEnvironment(const char* name) {
   return value;
 }
 
-/// The dive descriptions and presets (config/ of the workspace, share/exocet_mosaic/config installed):
+/// The dive descriptions and presets (exocet_mosaic's config/, share/exocet_mosaic/config installed):
 /// $EXOCET_CONFIG_DIR.
 inline std::string configDir() { return directoryFromEnvironment("EXOCET_CONFIG_DIR"); }
 
