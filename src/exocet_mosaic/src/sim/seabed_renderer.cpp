@@ -50,8 +50,8 @@ class HeightSampler {
         y0_m_(patch.y0_m),
         texel_m_(patch.texel_m),
         per_m_(1.0 / patch.texel_m),
-        max_x_(patch.texels.cols - 2),
-        max_y_(patch.texels.rows - 2) {
+        cols_(patch.texels.cols),
+        rows_(patch.texels.rows) {
     buildBlockMaxima();
   }
 
@@ -63,26 +63,7 @@ class HeightSampler {
   /// The height and its gradient (metres per metre) within the bilinear cell holding (x_m, y_m): the exact
   /// derivative of what operator() interpolates (0 across a clamped border).
   float sample(double x_m, double y_m, float* gx, float* gy) const {
-    const double fx = (x_m - x0_m_) / texel_m_;
-    const double fy = (y_m - y0_m_) / texel_m_;
-    int ix = static_cast<int>(std::floor(fx));
-    int iy = static_cast<int>(std::floor(fy));
-    float ax = static_cast<float>(fx - ix);
-    float ay = static_cast<float>(fy - iy);
-    if (ix < 0) {
-      ix = 0;
-      ax = 0.f;
-    } else if (ix > max_x_) {
-      ix = max_x_;
-      ax = 1.f;
-    }
-    if (iy < 0) {
-      iy = 0;
-      ay = 0.f;
-    } else if (iy > max_y_) {
-      iy = max_y_;
-      ay = 1.f;
-    }
+    const auto [ix, iy, ax, ay] = bilinearCell(x_m, y_m, x0_m_, y0_m_, texel_m_, cols_, rows_);
     const float* r0 = texels_[iy] + ix;
     const float* r1 = texels_[iy + 1] + ix;
     const float per_m = static_cast<float>(per_m_);
@@ -130,7 +111,7 @@ class HeightSampler {
 
   cv::Mat_<float> texels_;
   double x0_m_, y0_m_, texel_m_, per_m_;
-  int max_x_, max_y_;
+  int cols_, rows_;  // of the patch
   int blocks_x_ = 0, blocks_y_ = 0;
   std::vector<float> block_max_;
 };

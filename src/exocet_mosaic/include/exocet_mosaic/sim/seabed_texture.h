@@ -23,6 +23,47 @@ namespace exocet_mosaic {
 namespace sim {
 
 /**
+ * @brief The bilinear cell of world point (x_m, y_m) in a grid of cols x rows texels whose texel (0, 0) is centred on
+ * (x0_m, y0_m): its lower texel (ix, iy) and the weights (ax, ay) of the texels at ix + 1 and iy + 1, clamped to the
+ * grid's border (weight 0 or 1 there). The one place every sampler of a texture or a height map computes it, so that
+ * they all give the same bits.
+ */
+struct BilinearCell {
+  int ix = 0, iy = 0;
+  float ax = 0.f, ay = 0.f;
+};
+
+inline BilinearCell bilinearCell(double x_m, double y_m, double x0_m, double y0_m, double texel_m, int cols,
+                                 int rows) {
+  const double fx = (x_m - x0_m) / texel_m;
+  const double fy = (y_m - y0_m) / texel_m;
+  BilinearCell c;
+  c.ix = static_cast<int>(std::floor(fx));
+  c.iy = static_cast<int>(std::floor(fy));
+  c.ax = static_cast<float>(fx - c.ix);
+  c.ay = static_cast<float>(fy - c.iy);
+  const int max_x = cols - 2;
+  const int max_y = rows - 2;
+  if (c.ix < 0) {
+    c.ix = 0;
+    c.ax = 0.f;
+  }
+  if (c.iy < 0) {
+    c.iy = 0;
+    c.ay = 0.f;
+  }
+  if (c.ix > max_x) {
+    c.ix = max_x;
+    c.ax = 1.f;
+  }
+  if (c.iy > max_y) {
+    c.iy = max_y;
+    c.ay = 1.f;
+  }
+  return c;
+}
+
+/**
  * @brief A rectangular window of one texture level.
  *
  * Texel (col i, row j) of `texels` is centred on world point (x0_m + i * texel_m, y0_m + j * texel_m): rows go
@@ -38,18 +79,7 @@ struct TexturePatch {
 
   /// Bilinear sample at world point (x_m, y_m); clamped to the patch border.
   T sample(double x_m, double y_m) const {
-    const double fx = (x_m - x0_m) / texel_m;
-    const double fy = (y_m - y0_m) / texel_m;
-    int ix = static_cast<int>(std::floor(fx));
-    int iy = static_cast<int>(std::floor(fy));
-    float ax = static_cast<float>(fx - ix);
-    float ay = static_cast<float>(fy - iy);
-    const int max_x = texels.cols - 2;
-    const int max_y = texels.rows - 2;
-    if (ix < 0) { ix = 0; ax = 0.f; }
-    if (iy < 0) { iy = 0; ay = 0.f; }
-    if (ix > max_x) { ix = max_x; ax = 1.f; }
-    if (iy > max_y) { iy = max_y; ay = 1.f; }
+    const auto [ix, iy, ax, ay] = bilinearCell(x_m, y_m, x0_m, y0_m, texel_m, texels.cols, texels.rows);
     const T* r0 = texels[iy] + ix;
     const T* r1 = texels[iy + 1] + ix;
     return (r0[0] * (1.f - ax) + r0[1] * ax) * (1.f - ay) + (r1[0] * (1.f - ax) + r1[1] * ax) * ay;
@@ -135,30 +165,7 @@ class TextureWindow {
 
   /// Bilinear sample at world point (x_m, y_m); clamped to the window's border as TexturePatch::sample().
   T sample(double x_m, double y_m) const {
-    const double fx = (x_m - x0_m_) / texel_m_;
-    const double fy = (y_m - y0_m_) / texel_m_;
-    int ix = static_cast<int>(std::floor(fx));
-    int iy = static_cast<int>(std::floor(fy));
-    float ax = static_cast<float>(fx - ix);
-    float ay = static_cast<float>(fy - iy);
-    const int max_x = cols_ - 2;
-    const int max_y = rows_ - 2;
-    if (ix < 0) {
-      ix = 0;
-      ax = 0.f;
-    }
-    if (iy < 0) {
-      iy = 0;
-      ay = 0.f;
-    }
-    if (ix > max_x) {
-      ix = max_x;
-      ax = 1.f;
-    }
-    if (iy > max_y) {
-      iy = max_y;
-      ay = 1.f;
-    }
+    const auto [ix, iy, ax, ay] = bilinearCell(x_m, y_m, x0_m_, y0_m_, texel_m_, cols_, rows_);
     const int gx = ix + offset_x_, gy = iy + offset_y_;
     const int mask = (1 << tile_shift_) - 1;
     const int lx = gx & mask, ly = gy & mask;
