@@ -30,24 +30,31 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/binary_cache.h"
+#include "exocet_common/command_line.h"
+#include "exocet_common/json_file.h"
+#include "exocet_common/testing/paths.h"
+#include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/fusion/cross_pass_smoother.h"
 #include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/fusion/metric_motion.h"
 #include "exocet_mosaic/fusion/navigation_filter.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
-#include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/registration/motion_model.h"
 #include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
-#include "exocet_common/json_file.h"
 #include "exocet_mosaic/sim/navigation_sensors.h"
 #include "exocet_mosaic/sim/vehicle_trajectory.h"
-#include "exocet_common/command_line.h"
-#include "exocet_common/testing/paths.h"
 
 namespace {
+
+using exocet_common::fnv1a;
+using exocet_common::getValue;
+using exocet_common::getVector;
+using exocet_common::putValue;
+using exocet_common::putVector;
 
 using namespace exocet_mosaic;
 using Clock = std::chrono::steady_clock;
@@ -70,40 +77,13 @@ struct CapturedDive {
 
 constexpr uint64_t kCacheMagic = 0x3245564944535546ULL;  // "FUSDIVE2" (DR carried with the accelerometers)
 
-uint64_t fnv1a(const std::string& text) {
-  uint64_t h = 1469598103934665603ULL;
-  for (unsigned char c : text) h = (h ^ c) * 1099511628211ULL;
-  return h;
-}
-
-template <typename T>
-void put(std::ostream& out, const T& v) {
-  out.write(reinterpret_cast<const char*>(&v), sizeof(T));
-}
-template <typename T>
-bool get(std::istream& in, T* v) {
-  return bool(in.read(reinterpret_cast<char*>(v), sizeof(T)));
-}
-template <typename T>
-void putVector(std::ostream& out, const std::vector<T>& v) {
-  put(out, uint64_t(v.size()));
-  if (!v.empty()) out.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
-}
-template <typename T>
-bool getVector(std::istream& in, std::vector<T>* v) {
-  uint64_t n = 0;
-  if (!get(in, &n) || n > (1ULL << 32)) return false;
-  v->resize(n);
-  return n == 0 || bool(in.read(reinterpret_cast<char*>(v->data()), std::streamsize(n * sizeof(T))));
-}
-
 /// Plain-old-data copies of the records (Eigen members are trivially copyable; the rest are doubles).
 void writeCache(const std::string& path, const CapturedDive& d) {
   // A cache is an optimisation: when it cannot be written the next run renders again.
   const std::string temporary = exocet_common::temporaryPathFor(path);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    put(out, kCacheMagic);
+    putValue(out, kCacheMagic);
     putVector(out, d.frame_stamps_s);
     putVector(out, d.gsd_m);
     putVector(out, d.vehicle_yaw_rad);
@@ -114,8 +94,8 @@ void writeCache(const std::string& path, const CapturedDive& d) {
     putVector(out, d.altitude);
     putVector(out, d.dead_reckoning);
     putVector(out, d.usbl);
-    put(out, int32_t(d.gray.empty() ? 0 : d.gray[0].cols));
-    put(out, int32_t(d.gray.empty() ? 0 : d.gray[0].rows));
+    putValue(out, int32_t(d.gray.empty() ? 0 : d.gray[0].cols));
+    putValue(out, int32_t(d.gray.empty() ? 0 : d.gray[0].rows));
     for (const cv::Mat& g : d.gray) {
       const cv::Mat c = g.isContinuous() ? g : g.clone();
       out.write(reinterpret_cast<const char*>(c.data), std::streamsize(c.total()));
@@ -137,7 +117,7 @@ void writeCache(const std::string& path, const CapturedDive& d) {
 bool readCache(const std::string& path, CapturedDive* d) {
   std::ifstream in(path, std::ios::binary);
   uint64_t magic = 0;
-  if (!get(in, &magic) || magic != kCacheMagic) return false;
+  if (!getValue(in, &magic) || magic != kCacheMagic) return false;
   std::vector<Eigen::Matrix4d> poses;
   if (!getVector(in, &d->frame_stamps_s) || !getVector(in, &d->gsd_m) || !getVector(in, &d->vehicle_yaw_rad) ||
       !getVector(in, &poses) || !getVector(in, &d->imu) || !getVector(in, &d->altitude) ||
@@ -145,7 +125,7 @@ bool readCache(const std::string& path, CapturedDive* d) {
     return false;
   for (const auto& m : poses) d->world_from_camera.emplace_back(m);
   int32_t width = 0, height = 0;
-  if (!get(in, &width) || !get(in, &height)) return false;
+  if (!getValue(in, &width) || !getValue(in, &height)) return false;
   for (size_t i = 0; i < d->frame_stamps_s.size(); ++i) {
     cv::Mat g(height, width, CV_8UC1);
     if (!in.read(reinterpret_cast<char*>(g.data), std::streamsize(g.total()))) return false;
@@ -719,7 +699,8 @@ int main(int argc, char** argv) {
   const sim::CameraRig& rig = dive.synthesis.rig;
   const CapturedDive d = simulate(dive, out_dir + "/cache", 2);
   const size_t n = d.gray.size();
-  const exocet_common::UtmGrid grid = exocet_common::UtmGrid::forLatLon(dive.origin_latitude_deg, dive.origin_longitude_deg);
+  const exocet_common::UtmGrid grid =
+      exocet_common::UtmGrid::forLatLon(dive.origin_latitude_deg, dive.origin_longitude_deg);
   std::vector<Eigen::Vector2d> truth(n);
   for (size_t k = 0; k < n; ++k) truth[k] = d.world_from_camera[k].translation().head<2>();
   const double t0 = d.frame_stamps_s.front();

@@ -7,8 +7,8 @@
 
 #include <opencv2/imgproc.hpp>
 
-
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/binary_cache.h"
 #include "exocet_mosaic/sim/dive_synthesizer.h"
 
 namespace exocet_mosaic {
@@ -47,35 +47,24 @@ RenderedDive renderDive(const DiveDescription& dive, int threads) {
 
 namespace {
 
+using exocet_common::fnv1a;
+using exocet_common::getValue;
+using exocet_common::putValue;
+
 constexpr uint64_t kCacheMagic = 0x31564944474552ULL;  // "REGDIV1"
-
-uint64_t fnv1a(const std::string& text) {
-  uint64_t h = 1469598103934665603ULL;
-  for (unsigned char c : text) h = (h ^ c) * 1099511628211ULL;
-  return h;
-}
-
-template <typename T>
-void put(std::ostream& out, const T& v) {
-  out.write(reinterpret_cast<const char*>(&v), sizeof(T));
-}
-
-template <typename T>
-bool get(std::istream& in, T* v) {
-  return bool(in.read(reinterpret_cast<char*>(v), sizeof(T)));
-}
 
 bool readCache(const std::string& path, RenderedDive* dive) {
   std::ifstream in(path, std::ios::binary);
   uint64_t magic = 0, count = 0;
   int32_t width = 0, height = 0;
-  if (!get(in, &magic) || magic != kCacheMagic || !get(in, &count) || !get(in, &width) || !get(in, &height))
+  if (!getValue(in, &magic) || magic != kCacheMagic || !getValue(in, &count) || !getValue(in, &width) ||
+      !getValue(in, &height))
     return false;
   for (uint64_t i = 0; i < count; ++i) {
     double stamp, gain, turbidity, m[16];
-    if (!get(in, &stamp) || !get(in, &gain) || !get(in, &turbidity)) return false;
+    if (!getValue(in, &stamp) || !getValue(in, &gain) || !getValue(in, &turbidity)) return false;
     for (double& v : m)
-      if (!get(in, &v)) return false;
+      if (!getValue(in, &v)) return false;
     cv::Mat gray(height, width, CV_8UC1);
     if (!in.read(reinterpret_cast<char*>(gray.data), std::streamsize(width) * height)) return false;
     Eigen::Isometry3d pose;
@@ -94,16 +83,16 @@ void writeCache(const std::string& path, const RenderedDive& dive) {
   const std::string temporary = exocet_common::temporaryPathFor(path);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    put(out, kCacheMagic);
-    put(out, uint64_t(dive.gray.size()));
-    put(out, int32_t(dive.camera.width));
-    put(out, int32_t(dive.camera.height));
+    putValue(out, kCacheMagic);
+    putValue(out, uint64_t(dive.gray.size()));
+    putValue(out, int32_t(dive.camera.width));
+    putValue(out, int32_t(dive.camera.height));
     for (size_t i = 0; i < dive.gray.size(); ++i) {
-      put(out, dive.stamps_s[i]);
-      put(out, dive.light_gain[i]);
-      put(out, dive.turbidity[i]);
+      putValue(out, dive.stamps_s[i]);
+      putValue(out, dive.light_gain[i]);
+      putValue(out, dive.turbidity[i]);
       const Eigen::Matrix4d m = dive.local_from_camera[i].matrix();
-      for (int k = 0; k < 16; ++k) put(out, m.data()[k]);
+      for (int k = 0; k < 16; ++k) putValue(out, m.data()[k]);
       const cv::Mat g = dive.gray[i].isContinuous() ? dive.gray[i] : dive.gray[i].clone();
       out.write(reinterpret_cast<const char*>(g.data), std::streamsize(g.total()));
     }
