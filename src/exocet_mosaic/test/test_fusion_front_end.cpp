@@ -132,6 +132,36 @@ TEST(FusionFrontEnd, AnImagePairWithoutAttitudeOrHeightReachesTheFilterAsAFailur
   EXPECT_NEAR(with_operator_height.metric->camera_displacement_en_m.norm(), 0.04, 1e-6);
 }
 
+TEST(FusionFrontEnd, WithoutAnAltimeterTheHeightComesFromTheDepthAndTheSeabedDepth) {
+  FusionFrontEndConfig config;
+  config.seabed_depth_m = 20.0;
+  FusionFrontEnd front = makeFrontEnd(config);
+  front.initialize(0.5, Eigen::Vector2d(0.0, 0.0), Eigen::Matrix2d::Identity() * 0.01);
+  for (double t = 0.9; t <= 1.3; t += 0.1) front.addImuAttitude(t, yaw(0.0));
+  const InputOutcome no_depth = front.addImageMotion(translation(1.0, 1.04, 10.0, 0.0));
+  EXPECT_NE(no_depth.problem.find("~seabed_depth_m"), std::string::npos) << no_depth.problem;
+  // base_link at 18 m, the camera level with it (its lever arm is horizontal): 2 m above a 20 m seabed.
+  for (double t = 0.9; t <= 1.3; t += 0.1) front.addDepth(t, 18.0);
+  const auto height = front.cameraHeightAt(1.1, yaw(0.0), rigMounts().at("camera"));
+  ASSERT_TRUE(height.has_value());
+  EXPECT_NEAR(*height, 2.0, 1e-9);
+  const InputOutcome out = front.addImageMotion(translation(1.04, 1.08, 10.0, 0.0));
+  ASSERT_TRUE(out.metric.has_value()) << out.problem;
+  EXPECT_NEAR(out.metric->camera_displacement_en_m.norm(), 0.04, 1e-6);  // 10 px at 500 px from 2 m
+  // A camera 0.3 m below base_link is 0.3 m nearer the seabed; an altimeter, when it speaks, wins.
+  Eigen::Isometry3d low_camera = rigMounts().at("camera");
+  low_camera.translation().z() = -0.3;
+  EXPECT_NEAR(*front.cameraHeightAt(1.1, yaw(0.0), low_camera), 1.7, 1e-9);
+  for (double t = 0.9; t <= 1.3; t += 0.1) front.addAltimeterRange(t, 3.0, "altimeter");
+  EXPECT_NEAR(*front.cameraHeightAt(1.1, yaw(0.0), rigMounts().at("camera")), 3.0, 1e-9);
+  // Deeper than the seabed: no height from the depth.
+  FusionFrontEnd shallow = makeFrontEnd(config);
+  shallow.addDepth(1.0, 25.0);
+  EXPECT_FALSE(shallow.cameraHeightAt(1.0, yaw(0.0), rigMounts().at("camera")).has_value());
+  config.seabed_depth_m = -1.0;
+  EXPECT_THROW(makeFrontEnd(config), std::invalid_argument);
+}
+
 TEST(FusionFrontEnd, BadImageMotionsAreRejectedNamingTheFault) {
   FusionFrontEnd front = makeFrontEnd();
   feedLevelSensors(&front, 0.0, 2.0);

@@ -638,6 +638,46 @@ TEST(TilesGeoTiff, CogAndKmzOpenWithTheRightBounds) {
   EXPECT_EQ(kmz_alpha.at<uchar>(kmz_alpha.rows / 4, kmz_alpha.cols / 4), 255);
 }
 
+TEST(TilesGeoTiff, LocalFrameTileHasAnEngineeringCrsInMetresAndNoWgs84Box) {
+  TempDir dir;
+  TileWriterConfig config = configFor(dir.path());
+  config.write_cog = true;
+  config.write_kmz = true;  // no KMZ in a local frame: it would need WGS 84
+  GeoTiffTileWriter writer(config);
+  TileRaster raster = makeRaster(300, 200, 0, true, -12.5, 40.0, 0.02);
+  raster.utm_zone = 99;  // ignored in a local frame
+  raster.local_frame = "map";
+  const WrittenTile tile = writer.write(raster, makeMetadata());
+  ASSERT_TRUE(tile.ok) << tile.error;
+  EXPECT_EQ(tile.epsg, 0);
+  EXPECT_EQ(tile.local_frame, "map");
+  EXPECT_TRUE(tile.kmz_path.empty());
+  EXPECT_TRUE(std::isnan(tile.west_deg) && std::isnan(tile.north_deg));
+  EXPECT_DOUBLE_EQ(tile.min_easting_m, -12.5);
+  EXPECT_DOUBLE_EQ(tile.max_easting_m, -12.5 + 300 * 0.02);
+  EXPECT_DOUBLE_EQ(tile.min_northing_m, 40.0 - 200 * 0.02);
+  EXPECT_EQ(filesIn(dir.path()), (std::vector<std::string>{"tile_0000.cog.tif", "tile_0000.tfw", "tile_0000.tif"}));
+
+  for (const std::string& path : {tile.geotiff_path, tile.cog_path}) {
+    DatasetPtr dataset = openDataset(path);
+    ASSERT_TRUE(dataset) << path;
+    const OGRSpatialReference* srs = dataset->GetSpatialRef();
+    ASSERT_NE(srs, nullptr) << path << ": no CRS";
+    EXPECT_TRUE(srs->IsLocal()) << path;
+    EXPECT_FALSE(srs->IsGeographic() || srs->IsProjected()) << path;
+    EXPECT_DOUBLE_EQ(srs->GetLinearUnits(), 1.0) << path;  // metres
+    ASSERT_NE(srs->GetName(), nullptr);
+    EXPECT_NE(std::string(srs->GetName()).find("'map'"), std::string::npos) << srs->GetName();
+    double gt[6];
+    ASSERT_EQ(dataset->GetGeoTransform(gt), CE_None);
+    EXPECT_DOUBLE_EQ(gt[0], -12.5);
+    EXPECT_DOUBLE_EQ(gt[1], 0.02);
+    EXPECT_DOUBLE_EQ(gt[3], 40.0);
+    EXPECT_DOUBLE_EQ(gt[5], -0.02);
+  }
+  EXPECT_NE(readFile(tile.world_file_path).find("-12.49"), std::string::npos);  // centre of the top-left pixel
+}
+
 TEST(TilesGeoTiff, JpegKeepsTheMaskAsAnInternalMask) {
   TempDir dir;
   TileWriterConfig config = configFor(dir.path());

@@ -70,6 +70,10 @@ std::string FusionFrontEndConfig::validate() const {
     why << "view_half_window_s = " << view_half_window_s << " is outside [0, 10] s";
   else if (!(altimeter_sigma_m >= 0.0 && altimeter_sigma_m <= 10.0))
     why << "altimeter_sigma_m = " << altimeter_sigma_m << " is outside [0, 10] m";
+  else if (!std::isnan(seabed_depth_m) && !(seabed_depth_m > 0.0 && seabed_depth_m <= 12000.0))
+    why << "seabed_depth_m = " << seabed_depth_m << " is outside (0, 12000] m (NaN: not used)";
+  else if (!(depth_max_gap_s > 0.0 && depth_max_gap_s <= 600.0))
+    why << "depth_max_gap_s = " << depth_max_gap_s << " is outside (0, 600] s";
   else if (base_frame.empty() || default_camera_frame.empty())
     why << "base_frame and default_camera_frame must not be empty";
   return why.str();
@@ -81,7 +85,8 @@ FusionFrontEnd::FusionFrontEnd(const FusionFrontEndConfig& config, MountLookup m
       filter_(config.filter),
       imu_attitude_(config.history_window_s, config.attitude_max_gap_s),
       nav_attitude_(config.history_window_s, config.attitude_max_gap_s),
-      altimeter_range_m_(config.history_window_s, config.altitude_max_gap_s) {
+      altimeter_range_m_(config.history_window_s, config.altitude_max_gap_s),
+      depth_m_(config.history_window_s, config.depth_max_gap_s) {
   if (!mounts_) throw std::invalid_argument("fusion: no mount lookup given");
   filter_.setKeepLog(config.keep_log);
 }
@@ -98,6 +103,8 @@ void FusionFrontEnd::addAltimeterRange(double stamp_s, double range_m, const std
   altimeter_frame_ = frame;
   altimeter_range_m_.add(stamp_s, range_m);
 }
+
+void FusionFrontEnd::addDepth(double stamp_s, double depth_m) { depth_m_.add(stamp_s, depth_m); }
 
 void FusionFrontEnd::setCameraFrame(const std::string& frame) {
   if (!frame.empty()) camera_frame_ = frame;
@@ -137,6 +144,7 @@ void FusionFrontEnd::reset() {
   imu_attitude_.clear();
   nav_attitude_.clear();
   altimeter_range_m_.clear();
+  depth_m_.clear();
   image_only_en_m_.reset();
 }
 
@@ -199,6 +207,17 @@ std::optional<ViewGeometry> FusionFrontEnd::viewWith(double stamp_s, const Eigen
         } catch (const std::invalid_argument&) {
           // An altimeter beam that does not point down, or a height <= 0: the operator's height, if any.
         }
+      }
+    }
+  }
+  if (std::isfinite(config_.seabed_depth_m)) {
+    if (const auto depth_m = depth_m_.at(stamp_s)) {
+      // z is up: a camera above the sensor is shallower.
+      const double camera_depth_m = *depth_m - (world_from_base * base_from_camera.translation()).z();
+      const double height_m = config_.seabed_depth_m - camera_depth_m;
+      if (height_m > 0.0) {
+        view.camera_height_m = height_m;
+        return view;
       }
     }
   }
@@ -321,7 +340,12 @@ InputOutcome FusionFrontEnd::addImageMotion(const ImageMotionInput& motion) {
   const std::optional<ViewGeometry> v0 = viewWith(t0, *q0, mount.base_from_camera);
   const std::optional<ViewGeometry> v1 = viewWith(t1, *q1, mount.base_from_camera);
   if (!v0 || !v1) {
-    outcome.problem = "no camera height at the image stamps (altimeter or ~initial_altitude_m)";
+    outcome.problem = std::isfinite(config_.seabed_depth_m)
+                          ? "no camera height at the image stamps: no altimeter range and no depth (/nav/depth) "
+                            "above the seabed depth (~seabed_depth_m) covers them, and ~initial_altitude_m is not set"
+                          : "no camera height at the image stamps: no altimeter range covers them; set "
+                            "~initial_altitude_m (the camera's height above the seabed, m) or ~seabed_depth_m (with "
+                            "the depth sensor's /nav/depth)";
     return failImage(motion, outcome);
   }
   const MetricMotion metric =

@@ -69,7 +69,8 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
        {std::make_pair("motion_topic", &c.motion_topic), std::make_pair("odometry_topic", &c.odometry_topic),
         std::make_pair("nav_fix_topic", &c.nav_fix_topic), std::make_pair("usbl_topic", &c.usbl_topic),
         std::make_pair("imu_topic", &c.imu_topic), std::make_pair("altitude_topic", &c.altitude_topic),
-        std::make_pair("camera_info_topic", &c.camera_info_topic), std::make_pair("datum_topic", &c.datum_topic)}) {
+        std::make_pair("depth_topic", &c.depth_topic), std::make_pair("camera_info_topic", &c.camera_info_topic),
+        std::make_pair("datum_topic", &c.datum_topic)}) {
     params.readOptionalTopic(name, topic);  // "" turns an input off
   }
   for (auto [name, topic] :
@@ -129,6 +130,9 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                     "first heading, clockwise from grid north (degrees), unset for the IMU's");
   params.readDouble("initial_altitude_m", &c.initial_altitude_m, 1e-3, 1000.0,
                     "camera height above the seabed without an altimeter (m), unset for none");
+  params.readDouble("seabed_depth_m", &c.seabed_depth_m, 1e-3, 12000.0,
+                    "depth of the seabed (m): without an altimeter the camera height is this minus the camera's depth "
+                    "(/nav/depth), unset for none");
   params.readPositiveDouble("initial_sigma_m", &c.initial_sigma_m, 10000.0, "1-sigma of the first position (m)");
   if (std::isfinite(c.initial_latitude_deg) != std::isfinite(c.initial_longitude_deg))
     throw std::invalid_argument("parameters ~initial_latitude_deg and ~initial_longitude_deg go together");

@@ -45,10 +45,12 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   front_end.altitude_max_gap_s = config_.altitude_max_gap_s;
   front_end.view_half_window_s = config_.view_half_window_s;
   front_end.altimeter_sigma_m = config_.altimeter_sigma_m;
+  front_end.seabed_depth_m = config_.seabed_depth_m;
   front_end.base_frame = config_.base_frame;
   front_end.default_camera_frame = config_.camera_frame;
   front_end_ =
       std::make_unique<fu::FusionFrontEnd>(front_end, [this](const std::string& frame) { return mountOf(frame); });
+  world_frame_ = config_.utm_frame;
   if (config_.utm_zone > 0) {
     grid_ = exocet_common::UtmGrid::fromZone(config_.utm_zone, config_.northern_hemisphere);
     grid_source_ = "parameter ~utm_zone";
@@ -63,6 +65,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   subscribe(&usbl_sub_, config_.usbl_topic, 50, &FusionRos::onUsbl);
   subscribe(&imu_sub_, config_.imu_topic, 500, &FusionRos::onImu);
   subscribe(&altitude_sub_, config_.altitude_topic, 200, &FusionRos::onAltitude);
+  subscribe(&depth_sub_, config_.depth_topic, 200, &FusionRos::onDepth);  // used with ~seabed_depth_m
   // One camera_info per image announces it (its motion holds back the later inputs): as deep as the motions' queue,
   // or an image is missed when a replay's burst outruns the callbacks.
   subscribe(&camera_info_sub_, config_.camera_info_topic, 200, &FusionRos::onCameraInfo);
@@ -337,6 +340,15 @@ void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
   front_end_->addAltimeterRange(msg->header.stamp.toSec(), r, msg->header.frame_id);
 }
 
+void FusionRos::onDepth(const exocet_msgs::DepthConstPtr& msg) {
+  if (!std::isfinite(msg->depth_m) || msg->depth_m < -100.0 || msg->depth_m > 12000.0) {
+    rejectInput("depth", "depth " + std::to_string(msg->depth_m) + " m outside [-100, 12000] m or not finite");
+    return;
+  }
+  if (!admitStamp(msg->header.stamp, "depth", false)) return;
+  front_end_->addDepth(msg->header.stamp.toSec(), msg->depth_m);
+}
+
 void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
   Eigen::Matrix3d k;
   for (int i = 0; i < 9; ++i) k(i / 3, i % 3) = msg->K[i];
@@ -378,10 +390,19 @@ void FusionRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
     rejectInput("dead reckoning", "position is not finite");
     return;
   }
-  if (msg->header.frame_id != config_.utm_frame) {
-    rejectInput("dead reckoning", "frame '" + msg->header.frame_id + "', expected the UTM frame '" + config_.utm_frame +
-                                      "' (parameter ~utm_frame)");
-    return;
+  if (msg->header.frame_id != world_frame_) {
+    if (grid_ || local_world_ || msg->header.frame_id.empty()) {
+      rejectInput("dead reckoning", "frame '" + msg->header.frame_id + "', expected '" + world_frame_ + "' (" +
+                                        (local_world_ ? "the dive's local frame" : "the UTM frame, ~utm_frame") + ")");
+      return;
+    }
+    // Navigation in a local metric frame and nothing geo-referenced: the dive is mapped in that frame.
+    world_frame_ = msg->header.frame_id;
+    local_world_ = true;
+    ROS_WARN(
+        "fusion: dead reckoning in the local frame '%s' with no datum (/nav/datum), ~utm_zone or latitude / "
+        "longitude: the fused track and the tiles are in that frame, not geo-referenced",
+        world_frame_.c_str());
   }
   if (!admitStamp(msg->header.stamp, "dead reckoning", false)) return;
   Eigen::Matrix2d covariance;
@@ -393,6 +414,10 @@ void FusionRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
 }
 
 void FusionRos::onNavFix(const sensor_msgs::NavSatFixConstPtr& msg) {
+  if (local_world_) {
+    rejectInput("dead reckoning", "latitude / longitude in a dive mapped in the local frame '" + world_frame_ + "'");
+    return;
+  }
   if (!std::isfinite(msg->latitude) || !std::isfinite(msg->longitude) || std::abs(msg->latitude) > 90.0 ||
       msg->longitude < -180.0 || msg->longitude >= 360.0) {
     std::ostringstream why;
@@ -434,6 +459,11 @@ void FusionRos::processDeadReckoning(const ros::Time& stamp, const Eigen::Vector
 
 void FusionRos::onUsbl(const sensor_msgs::NavSatFixConstPtr& msg) {
   ++fixes_;
+  if (local_world_) {
+    rejectInput("fix", "a latitude / longitude fix in a dive mapped in the local frame '" + world_frame_ +
+                           "' (no datum to place it)");
+    return;
+  }
   if (msg->status.status < sensor_msgs::NavSatStatus::STATUS_FIX) {
     rejectInput("fix", "status says no fix");
     return;
@@ -507,7 +537,11 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
   if (!outcome.rejected.empty()) rejectInput("image motion", outcome.rejected);
   if (!outcome.problem.empty()) {
     last_problem_ = outcome.problem;
-    ROS_WARN_THROTTLE(5.0, "fusion: %s", outcome.problem.c_str());
+    // Said once plainly (it usually asks for a setting), then repeated at most every 5 s.
+    if (problems_told_.size() < 100 && problems_told_.insert(outcome.problem).second)
+      ROS_ERROR("fusion: %s", outcome.problem.c_str());
+    else
+      ROS_WARN_THROTTLE(5.0, "fusion: %s", outcome.problem.c_str());
   }
   if (!outcome.update) return;  // refused before the filter
   const bool waiting = outcome.update->status == fu::UpdateStatus::kNotInitialized;
@@ -535,11 +569,13 @@ void FusionRos::handleOutcome(const std::string& kind, const fu::InputOutcome& o
 void FusionRos::ensureMapOrigin(const Eigen::Vector2d& en_m) {
   if (map_origin_en_m_) return;
   const double g = config_.map_origin_grid_m;
-  map_origin_en_m_ = Eigen::Vector2d(std::round(en_m.x() / g) * g, std::round(en_m.y() / g) * g);
-  if (!config_.publish_tf) return;
+  // A local frame keeps its own origin: rviz's single precision is not at stake there.
+  map_origin_en_m_ = local_world_ ? Eigen::Vector2d::Zero()
+                                  : Eigen::Vector2d(std::round(en_m.x() / g) * g, std::round(en_m.y() / g) * g);
+  if (!config_.publish_tf || config_.map_frame == world_frame_) return;
   geometry_msgs::TransformStamped t;
   t.header.stamp = ros::Time::now();
-  t.header.frame_id = config_.utm_frame;
+  t.header.frame_id = world_frame_;
   t.child_frame_id = config_.map_frame;
   t.transform.translation.x = map_origin_en_m_->x();
   t.transform.translation.y = map_origin_en_m_->y();
@@ -577,7 +613,7 @@ void FusionRos::publishState(const ros::Time& stamp) {
 
   nav_msgs::Odometry odometry;
   odometry.header.stamp = stamp;
-  odometry.header.frame_id = config_.utm_frame;
+  odometry.header.frame_id = world_frame_;
   odometry.child_frame_id = config_.fused_camera_frame;
   odometry.pose.pose.position.x = s.position_en_m.x();
   odometry.pose.pose.position.y = s.position_en_m.y();
@@ -744,7 +780,8 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   };
   status.add("initialised", front_end_->filter().initialized());
   status.add("utm zone", grid_ ? grid_->name() + " (EPSG " + std::to_string(grid_->epsg()) + ") from " + grid_source_
-                               : std::string("unknown"));
+                         : local_world_ ? "none: local frame '" + world_frame_ + "'"
+                                        : std::string("unknown"));
   status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", front_end_->filter().config().gate_probability,
               front_end_->filter().config().gateThreshold());
   status.add("image motions", motions_);

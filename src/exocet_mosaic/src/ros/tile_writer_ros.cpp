@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
 
@@ -116,6 +117,7 @@ TileWriterRos::~TileWriterRos() {
   }
   write_cv_.notify_all();
   if (writer_thread_.joinable()) writer_thread_.join();
+  writeRunSummary();
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -240,6 +242,17 @@ void TileWriterRos::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
     return;
   }
   pose.world_from_camera.normalize();
+  ++poses_;
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    if (local_frame_ != msg->header.frame_id) {
+      local_frame_ = msg->header.frame_id;
+      ROS_WARN(
+          "tile writer: fused poses in frame '%s', not in the UTM frame '%s' (~frame_id): the dive is not "
+          "geo-referenced, tiles are written in the local metric frame '%s'",
+          local_frame_.c_str(), config_.frame_id.c_str(), local_frame_.c_str());
+    }
+  }
   addAndProcess([&](double now_s) {
     return assembler_.addPose(static_cast<std::int64_t>(msg->header.stamp.toNSec()), pose, now_s);
   });
@@ -251,6 +264,7 @@ void TileWriterRos::onCameraHeight(const sensor_msgs::RangeConstPtr& msg) {
     reject("camera height " + std::to_string(msg->range) + " m is not a positive number: ignored");
     return;
   }
+  ++camera_heights_;
   addAndProcess([&](double now_s) {
     return assembler_.addHeight(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->range, now_s);
   });
@@ -527,7 +541,7 @@ void TileWriterRos::writerLoop() {
       failed_tiles_.pop_front();
       last_retry = ros::WallTime::now();
     }
-    if (!utm_zone_) {
+    if (!utm_zone_ && local_frame_.empty()) {
       // No zone yet (no datum): keep the mosaic until one arrives.
       last_write_error_ = "no UTM zone known (no /mosaic/datum and ~utm_zone is 0): tile kept in memory";
       failed_tiles_.push_back(std::move(pending));
@@ -543,8 +557,9 @@ void TileWriterRos::writerLoop() {
     raster.origin_easting_m = pending.mosaic.origin_easting_m;
     raster.origin_northing_m = pending.mosaic.origin_northing_m;
     raster.gsd_m = pending.mosaic.gsd_m;
-    raster.utm_zone = *utm_zone_;
+    raster.utm_zone = utm_zone_.value_or(0);
     raster.northern_hemisphere = northern_;
+    raster.local_frame = local_frame_;
     tiles::TileMetadata metadata;
     metadata.dive_name = config_.dive_name;
     metadata.first_frame = pending.mosaic.first_frame;
@@ -594,7 +609,7 @@ void TileWriterRos::writerLoop() {
 void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic) {
   exocet_msgs::Tile msg;
   msg.header.stamp.fromSec(std::max(0.0, mosaic.end_time_s));
-  msg.header.frame_id = config_.frame_id;
+  msg.header.frame_id = tile.local_frame.empty() ? config_.frame_id : tile.local_frame;
   msg.index = tile.index;
   msg.geotiff_path = tile.geotiff_path;
   msg.world_file_path = tile.world_file_path;
@@ -646,13 +661,13 @@ void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::C
 
 void TileWriterRos::publishFootprints() {
   // rviz draws in single precision: UTM coordinates go relative to the map origin when the fusion gave one.
-  const bool in_map = map_origin_en_m_.has_value();
+  const bool in_map = map_origin_en_m_.has_value() && local_frame_.empty();
   const Eigen::Vector2d origin = in_map ? *map_origin_en_m_ : Eigen::Vector2d::Zero();
   visualization_msgs::MarkerArray array;
   for (std::size_t i = 0; i < written_outlines_.size(); ++i) {
     visualization_msgs::Marker m;
     m.header.stamp = ros::Time::now();
-    m.header.frame_id = in_map ? config_.map_frame : config_.frame_id;
+    m.header.frame_id = in_map ? config_.map_frame : !local_frame_.empty() ? local_frame_ : config_.frame_id;
     m.ns = "tiles";
     m.id = written_[i].index;
     m.type = visualization_msgs::Marker::LINE_STRIP;
@@ -701,12 +716,16 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(DiagnosticStatus::ERROR, "tiles lost: the output folder kept failing (" + write_error + ")");
   else if (failed > 0)
     status.summary(DiagnosticStatus::ERROR, "tiles waiting for a retry: " + write_error);
-  else if (!utm_zone_)
+  else if (!utm_zone_ && local_frame_.empty())
     status.summary(DiagnosticStatus::WARN, "no UTM zone yet (/mosaic/datum or ~utm_zone)");
   else if (images_ > 0 && stats.frames_composed == 0)
     status.summary(DiagnosticStatus::WARN, "images arrive but none is composed: " + stats.last_problem);
   else
     status.summary(DiagnosticStatus::OK, "composing");
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    status.add("frame of the tiles", local_frame_.empty() ? "UTM" : "local frame '" + local_frame_ + "'");
+  }
   status.add("images received", images_);
   status.add("images rejected", rejected_);
   status.add("frames composed", stats.frames_composed);
@@ -729,6 +748,66 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("UDP failures", udp_failures_);
   status.add("last problem", last_problem_.empty() ? stats.last_problem : last_problem_);
   status.add("last write error", write_error);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// End of the run.
+
+std::string TileWriterRos::noTileReason() {
+  compose::ComposerStats stats;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    stats = composer_.stats();
+  }
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  if (tiles_written_ > 0) return "";
+  if (images_ == 0) return "no image arrived on " + config_.image_topic;
+  if (stats.frames_composed == 0) {
+    std::string why = std::to_string(images_) + " images received, none composed: ";
+    const std::string problem = !stats.last_problem.empty() ? stats.last_problem : last_problem_;
+    if (poses_ == 0)
+      why += "no fused pose arrived from the fusion (" + config_.odometry_topic +
+             "): see fusion_node's log and /diagnostics";
+    else if (camera_heights_ == 0)
+      why += "no camera height arrived from the fusion (" + config_.camera_height_topic +
+             "): a dive without an altimeter needs the camera's height above the seabed, fusion's ~initial_altitude_m "
+             "(replay: camera_height_m:=M), or the seabed's depth, ~seabed_depth_m (replay: seabed_depth_m:=M)";
+    else if (stats.frames_skipped_no_pose > 0 || stats.frames_skipped_no_chain > 0)
+      why += "no fused pose at their stamps; see fusion_node's log and /diagnostics";
+    else
+      why += "they waited for their motion, pose and camera height and timed out";
+    if (!problem.empty()) why += " (last problem: " + problem + ")";
+    return why;
+  }
+  if (!failed_tiles_.empty() || tiles_dropped_ > 0) return "tiles could not be written: " + last_write_error_;
+  return std::to_string(stats.frames_composed) + " images composed but no mosaic closed";
+}
+
+void TileWriterRos::writeRunSummary() {
+  const std::string reason = noTileReason();
+  nlohmann::ordered_json summary;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    summary["tiles_written"] = tiles_written_;
+    summary["tiles_not_written"] = static_cast<std::int64_t>(failed_tiles_.size()) + tiles_dropped_;
+    summary["frame"] = local_frame_.empty() ? "utm" : local_frame_;
+    summary["epsg"] = local_frame_.empty() && utm_zone_ ? tiles::epsgForUtm(*utm_zone_, northern_) : 0;
+  }
+  summary["images_received"] = images_;
+  summary["poses_received"] = poses_;
+  summary["camera_heights_received"] = camera_heights_;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    summary["frames_composed"] = composer_.stats().frames_composed;
+  }
+  summary["reason"] = reason.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(reason);
+  if (!reason.empty()) ROS_ERROR("tile writer: no tile written: %s", reason.c_str());
+  const std::string path = config_.files.output_dir + "/run_summary.json";
+  try {
+    exocet_common::writeJsonFileAtomically(path, summary);
+  } catch (const std::exception& e) {
+    ROS_ERROR("tile writer: cannot write %s: %s", path.c_str(), e.what());
+  }
 }
 
 }  // namespace exocet_mosaic

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -206,7 +207,7 @@ std::string checkRaster(const TileRaster& raster) {
   if (!std::isfinite(raster.origin_easting_m) || !std::isfinite(raster.origin_northing_m)) {
     errors.push_back("origin_easting_m and origin_northing_m must be finite");
   }
-  if (raster.utm_zone < 0 || raster.utm_zone > 60) {
+  if (raster.local_frame.empty() && (raster.utm_zone < 0 || raster.utm_zone > 60)) {
     errors.push_back("utm_zone must be in [0, 60] (1..60 UTM, 0 UPS), got " + std::to_string(raster.utm_zone));
   }
   std::string joined;
@@ -221,6 +222,11 @@ void computeBounds(const TileRaster& raster, WrittenTile* tile) {
   tile->max_northing_m = raster.origin_northing_m;
   tile->max_easting_m = raster.origin_easting_m + raster.image.cols * raster.gsd_m;
   tile->min_northing_m = raster.origin_northing_m - raster.image.rows * raster.gsd_m;
+  if (!raster.local_frame.empty()) {
+    // Not geo-referenced: no latitude or longitude to give.
+    tile->west_deg = tile->east_deg = tile->south_deg = tile->north_deg = std::numeric_limits<double>::quiet_NaN();
+    return;
+  }
   const auto grid = exocet_common::UtmGrid::fromZone(raster.utm_zone, raster.northern_hemisphere);
   const double centre_e = 0.5 * (tile->min_easting_m + tile->max_easting_m);
   const double centre_n = 0.5 * (tile->min_northing_m + tile->max_northing_m);
@@ -462,7 +468,14 @@ void writeGeoTiff(const TileWriterConfig& config, const TileRaster& raster, cons
   double geotransform[6] = {raster.origin_easting_m, raster.gsd_m, 0.0, raster.origin_northing_m, 0.0, -raster.gsd_m};
   dataset->SetGeoTransform(geotransform);
   OGRSpatialReference srs;
-  if (srs.importFromEPSG(tile.epsg) != OGRERR_NONE) {
+  if (!raster.local_frame.empty()) {
+    // An engineering CRS: QGIS opens the tile in metres, and its name says which frame and that it has no geodetic
+    // datum.
+    const std::string name =
+        "Exocet local frame '" + raster.local_frame + "' (metres, x east, y north; not geo-referenced)";
+    if (srs.SetLocalCS(name.c_str()) != OGRERR_NONE || srs.SetLinearUnits(SRS_UL_METER, 1.0) != OGRERR_NONE)
+      throw TileWriteError("cannot make the local CRS of frame '" + raster.local_frame + "': " + errors->take());
+  } else if (srs.importFromEPSG(tile.epsg) != OGRERR_NONE) {
     throw TileWriteError("the PROJ database does not know EPSG:" + std::to_string(tile.epsg) + ": " + errors->take());
   }
   srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);  // easting first, as the geotransform
@@ -732,7 +745,8 @@ WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetad
   const std::string raster_error = checkRaster(raster);
   if (!raster_error.empty()) return finish("invalid tile raster: " + raster_error);
   try {
-    tile.epsg = epsgForUtm(raster.utm_zone, raster.northern_hemisphere);
+    tile.local_frame = raster.local_frame;
+    tile.epsg = raster.local_frame.empty() ? epsgForUtm(raster.utm_zone, raster.northern_hemisphere) : 0;
     computeBounds(raster, &tile);
   } catch (const std::exception& e) {
     return finish(std::string("tile raster outside its UTM zone's limits: ") + e.what());
@@ -754,6 +768,8 @@ WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetad
   ScopedGdalOption internal_mask("GDAL_TIFF_INTERNAL_MASK", "YES");
   ScopedGdalOption overview_block("GDAL_TIFF_OVR_BLOCKSIZE", std::to_string(config_.block_size_px));
   TileFiles files(config_.output_dir);
+  // A KMZ is in WGS 84: a tile in a local frame has none.
+  const bool write_kmz = config_.write_kmz && raster.local_frame.empty();
   try {
     // Companions first and the GeoTIFF last in commit order: once the GeoTIFF exists, so do they.
     std::string world_tmp, cog_tmp, kmz_tmp;
@@ -761,15 +777,15 @@ WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetad
     if (config_.write_cog) cog_tmp = files.add(base + ".cog.tif");
     // The KMZ driver writes a KMZ only for a name ending in ".kmz", and GDAL's /vsizip/ cannot handle a second
     // ".kmz" inside the name: ".<base>.partial.kmz".
-    if (config_.write_kmz) kmz_tmp = files.add(base + ".kmz", "." + base + ".partial.kmz");
+    if (write_kmz) kmz_tmp = files.add(base + ".kmz", "." + base + ".partial.kmz");
     const std::string tif_tmp = files.add(base + ".tif");
 
     writeGeoTiff(config_, raster, metadata, tile, tif_tmp, &errors);
     if (config_.write_world_file) writeTextFile(world_tmp, worldFileText(raster), "world file");
-    if (config_.write_cog || config_.write_kmz) {
+    if (config_.write_cog || write_kmz) {
       DatasetPtr written = openWritten(tif_tmp, &errors);
       if (config_.write_cog) writeCog(config_, written.get(), cog_tmp, &errors);
-      if (config_.write_kmz) writeKmz(config_, written.get(), base, kmz_tmp, &errors);
+      if (write_kmz) writeKmz(config_, written.get(), base, kmz_tmp, &errors);
     }
     files.commit();
   } catch (const TileWriteError& e) {
@@ -784,7 +800,7 @@ WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetad
   tile.geotiff_path = folder_base + ".tif";
   if (config_.write_world_file) tile.world_file_path = folder_base + ".tfw";
   if (config_.write_cog) tile.cog_path = folder_base + ".cog.tif";
-  if (config_.write_kmz) tile.kmz_path = folder_base + ".kmz";
+  if (write_kmz) tile.kmz_path = folder_base + ".kmz";
   return finish("");
 }
 

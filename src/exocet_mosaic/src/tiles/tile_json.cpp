@@ -39,6 +39,8 @@ std::string tileToJson(const WrittenTile& tile) {
   json["cog_path"] = pathOrNull(tile.cog_path);
   json["kmz_path"] = pathOrNull(tile.kmz_path);
   json["epsg"] = tile.epsg;
+  json["local_frame"] =
+      tile.local_frame.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(tile.local_frame);
   json["min_easting_m"] = tile.min_easting_m;
   json["min_northing_m"] = tile.min_northing_m;
   json["max_easting_m"] = tile.max_easting_m;

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -27,10 +28,10 @@ namespace fusion {
 
 struct FusionFrontEndConfig {
   FilterConfig filter;
-  bool keep_log = true;               ///< keep every filter step (RTS smoothing, track files)
-  double attitude_max_gap_s = 0.5;    ///< attitude samples further apart are not interpolated between (0, 60] s
-  double altitude_max_gap_s = 1.0;    ///< altimeter samples further apart are not interpolated between (0, 600] s
-  double history_window_s = 30.0;     ///< how long attitude and altitude samples are kept [1, 3600] s
+  bool keep_log = true;             ///< keep every filter step (RTS smoothing, track files)
+  double attitude_max_gap_s = 0.5;  ///< attitude samples further apart are not interpolated between (0, 60] s
+  double altitude_max_gap_s = 1.0;  ///< altimeter samples further apart are not interpolated between (0, 600] s
+  double history_window_s = 30.0;   ///< how long attitude and altitude samples are kept [1, 3600] s
   /// Half-width of the window over which roll, pitch and the altimeter range are fitted (a quadratic in time) at an
   /// image's stamp: their noise is white, so the fit averages it. 0: interpolated between the samples around the
   /// stamp. With a window, an image's view is complete only `view_half_window_s` after its stamp: the caller hands
@@ -38,6 +39,11 @@ struct FusionFrontEndConfig {
   double view_half_window_s = 0.0;
   /// 1-sigma of one altimeter range (m), from its datasheet; 0 = unknown (the height is then taken as exact) [0, 10].
   double altimeter_sigma_m = 0.0;
+  /// Depth of the seabed below the surface (m), for a dive without an altimeter: the camera's height is then this
+  /// minus the camera's depth (the depth sensor's, moved to the camera by the mount). NaN: not used; else (0, 12000].
+  /// A flat-seabed assumption: the height's error is the seabed's relief under the camera.
+  double seabed_depth_m = std::numeric_limits<double>::quiet_NaN();
+  double depth_max_gap_s = 2.0;                 ///< depth samples further apart are not interpolated between (0, 600] s
   std::string base_frame = "base_link";         ///< the vehicle's body frame: positions of navigation refer to it
   std::string default_camera_frame = "camera";  ///< the camera's frame until a motion names its own
 
@@ -53,9 +59,9 @@ struct ImageMotionInput {
   double previous_stamp_s = 0.0;
   double stamp_s = 0.0;
   bool failed = false;
-  std::string model;                    ///< motion model name (registration::toString)
-  Eigen::VectorXd parameters;           ///< of the model, centred on centre_px (pixels)
-  Eigen::MatrixXd covariance;           ///< of the parameters (pixel units)
+  std::string model;           ///< motion model name (registration::toString)
+  Eigen::VectorXd parameters;  ///< of the model, centred on centre_px (pixels)
+  Eigen::MatrixXd covariance;  ///< of the parameters (pixel units)
   Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
   Eigen::Matrix3d pixel_matrix = Eigen::Matrix3d::Identity();  ///< previous-image pixels to current-image pixels
   std::optional<Eigen::Matrix3d> camera_matrix;                ///< of the registered images, when the message has it
@@ -63,7 +69,7 @@ struct ImageMotionInput {
 
 /// What became of one input.
 struct InputOutcome {
-  std::optional<UpdateResult> update;   ///< the filter's verdict, when the input reached the filter
+  std::optional<UpdateResult> update;  ///< the filter's verdict, when the input reached the filter
   /// Non-empty when the input itself is unusable (counted as rejected): why.
   std::string rejected;
   /// Non-empty when the input could not be used for want of something else (a mount, an attitude, a height): why.
@@ -96,6 +102,8 @@ class FusionFrontEnd {
   void addNavigationAttitude(double stamp_s, const Eigen::Quaterniond& world_from_base);
   /// An altimeter range (m) along the body's -z from the mount `frame`.
   void addAltimeterRange(double stamp_s, double range_m, const std::string& frame);
+  /// Depth of base_link below the surface (m, positive down), from the pressure sensor.
+  void addDepth(double stamp_s, double depth_m);
   /// Intrinsics to use for motions that carry none (the camera_info's).
   void setCameraMatrix(const Eigen::Matrix3d& camera_matrix) { camera_matrix_ = camera_matrix; }
   /// The camera's frame, as named by the motions.
@@ -130,7 +138,8 @@ class FusionFrontEnd {
   /// `base_from_camera`, from the sensors' attitude (fitted over the view window when one is set); empty when the
   /// attitude or the height is unknown.
   std::optional<ViewGeometry> viewAt(double stamp_s, const Eigen::Isometry3d& base_from_camera) const;
-  /// Camera height above the seabed at a stamp: the altimeter's, else the operator's; empty when unknown.
+  /// Camera height above the seabed at a stamp: the altimeter's, else the seabed depth minus the camera's depth (when
+  /// seabed_depth_m is set), else the operator's; empty when unknown.
   std::optional<double> cameraHeightAt(double stamp_s, const Eigen::Quaterniond& world_from_base,
                                        const Eigen::Isometry3d& base_from_camera) const;
   /// The camera's mount (base_link -> camera frame), when known.
@@ -162,6 +171,7 @@ class FusionFrontEnd {
   NavigationFilter filter_;
   AttitudeHistory imu_attitude_, nav_attitude_;
   ScalarHistory altimeter_range_m_;
+  ScalarHistory depth_m_;
   std::string altimeter_frame_;
   std::string camera_frame_;
   std::optional<Eigen::Matrix3d> camera_matrix_;

@@ -31,14 +31,15 @@ enum class ImageStorage { kRaw, kJpeg, kPng };
 ImageStorage parseImageStorage(const std::string& name);
 
 /// sensor_msgs/CameraInfo of a camera model (plumb_bob), frame camera_optical.
-sensor_msgs::CameraInfo toCameraInfo(const exocet_common::CameraModel& camera, double stamp_s, const std::string& frame_id);
+sensor_msgs::CameraInfo toCameraInfo(const exocet_common::CameraModel& camera, double stamp_s,
+                                     const std::string& frame_id);
 
 class DiveBagWriter {
  public:
   struct Options {
     ImageStorage image_storage = ImageStorage::kRaw;
-    int jpeg_quality = 90;   ///< 1..100
-    bool compress_chunks = false;  ///< LZ4 chunk compression (deterministic)
+    int jpeg_quality = 90;            ///< 1..100
+    bool compress_chunks = false;     ///< LZ4 chunk compression (deterministic)
     std::string world_frame = "utm";  ///< frame of positions: "utm" (geo-referenced) or "map" (local)
   };
 
@@ -48,7 +49,7 @@ class DiveBagWriter {
   DiveBagWriter(const DiveBagWriter&) = delete;
   DiveBagWriter& operator=(const DiveBagWriter&) = delete;
 
-  void writeDatum(const exocet_common::GeoReference& datum, double stamp_s);  ///< latched
+  void writeDatum(const exocet_common::GeoReference& datum, double stamp_s);                         ///< latched
   void writeStaticTransforms(const std::vector<dive::StaticTransform>& transforms, double stamp_s);  ///< latched
   /// Image and its camera_info, both stamped at frame.stamp_s. A compressed storage uses frame.compressed if
   /// compressFrame() filled it, otherwise compresses the image here.

@@ -24,6 +24,7 @@ struct FusionNodeConfig {
   std::string usbl_topic = topics::kNavUsbl;            ///< sensor_msgs/NavSatFix, absolute fixes (late)
   std::string imu_topic = topics::kNavImu;              ///< sensor_msgs/Imu: attitude, ENU
   std::string altitude_topic = topics::kNavAltitude;    ///< sensor_msgs/Range: altimeter
+  std::string depth_topic = topics::kNavDepth;          ///< exocet_msgs/Depth: depth of base_link (~seabed_depth_m)
   std::string camera_info_topic = topics::kCameraInfo;  ///< K when a motion message carries none
   std::string datum_topic = topics::kNavDatum;          ///< exocet_msgs/GeoDatum: the dive's UTM zone
 
@@ -61,7 +62,10 @@ struct FusionNodeConfig {
   double initial_easting_m = NAN, initial_northing_m = NAN;
   double initial_heading_deg = NAN;  ///< grid heading, clockwise from north [0, 360)
   double initial_altitude_m = NAN;   ///< camera height above the seabed (0, 1000] m
-  double initial_sigma_m = 1.0;      ///< (0, 10000] m
+  /// Depth of the seabed (m): without an altimeter, camera height = this - the camera's depth (/nav/depth), a flat
+  /// seabed assumed; NaN: not used; (0, 12000] m.
+  double seabed_depth_m = NAN;
+  double initial_sigma_m = 1.0;  ///< (0, 10000] m
 
   // Outputs.
   std::string odometry_out_topic = "/mosaic/odometry";

@@ -11,11 +11,13 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
 #include <exocet_mosaic/FusionConfig.h>
+#include <exocet_msgs/Depth.h>
 #include <exocet_msgs/GeoDatum.h>
 #include <exocet_msgs/ImageMotion.h>
 #include <exocet_msgs/SetInitialPose.h>
@@ -32,8 +34,8 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
-#include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_common/utm_grid.h"
+#include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
 namespace exocet_mosaic {
@@ -68,6 +70,7 @@ class FusionRos {
   void onUsbl(const sensor_msgs::NavSatFixConstPtr& msg);
   void onImu(const sensor_msgs::ImuConstPtr& msg);
   void onAltitude(const sensor_msgs::RangeConstPtr& msg);
+  void onDepth(const exocet_msgs::DepthConstPtr& msg);
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg);
   void onDatum(const exocet_msgs::GeoDatumConstPtr& msg);
   bool onSetInitialPose(exocet_msgs::SetInitialPose::Request& request, exocet_msgs::SetInitialPose::Response& response);
@@ -121,8 +124,8 @@ class FusionRos {
   std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::FusionConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
 
-  ros::Subscriber motion_sub_, odometry_sub_, nav_fix_sub_, usbl_sub_, imu_sub_, altitude_sub_, camera_info_sub_,
-      datum_sub_;
+  ros::Subscriber motion_sub_, odometry_sub_, nav_fix_sub_, usbl_sub_, imu_sub_, altitude_sub_, depth_sub_,
+      camera_info_sub_, datum_sub_;
   ros::ServiceServer initial_pose_srv_, smooth_srv_;
   ros::Publisher odometry_pub_, fused_path_pub_, nav_path_pub_, image_path_pub_, smoothed_path_pub_;
   ros::Publisher camera_height_pub_, datum_pub_;
@@ -138,6 +141,11 @@ class FusionRos {
   // Geography.
   std::optional<exocet_common::UtmGrid> grid_;
   std::string grid_source_;
+  std::set<std::string> problems_told_;  ///< each distinct problem is logged once as an error, then throttled
+  /// The frame of the fused positions: ~utm_frame, or the navigation's own frame when it is a local metric frame
+  /// (no datum, no ~utm_zone, no latitude/longitude): the dive is then not geo-referenced.
+  std::string world_frame_;
+  bool local_world_ = false;
   std::optional<Eigen::Vector2d> map_origin_en_m_;  ///< utm -> map offset (rviz cannot draw UTM-sized floats)
 
   // Mounts on the vehicle, looked up once each from tf.

@@ -29,9 +29,9 @@ namespace exocet_mosaic {
 
 /// Settings of the registration node; each is the private parameter of the same name (see readRegistrationNodeConfig).
 struct RegistrationNodeConfig {
-  registration::RegistrationConfig registration;  ///< ~method, ~model, ~klt/..., ~rmr/...
+  registration::RegistrationConfig registration;   ///< ~method, ~model, ~klt/..., ~rmr/...
   registration::SequenceRegistrarConfig sequence;  ///< ~max_gap_s, ~undistort
-  std::string image_topic = topics::kImageRaw;    ///< sensor_msgs/Image; `<image_topic>/compressed` is also watched
+  std::string image_topic = topics::kImageRaw;     ///< sensor_msgs/Image; `<image_topic>/compressed` is also watched
   /// auto: the first of raw (image_transport) and `<image_topic>/compressed` that delivers; raw; compressed. The
   /// compressed topic is decoded here because Debian's ROS has no compressed_image_transport plugin.
   std::string transport = "auto";

@@ -24,7 +24,7 @@ struct TileWriterNodeConfig {
   /// Subscriber queue of the images [1, 1000] (the motions, poses and heights get at least 500): a replay's images
   /// wait here while a burst of key frames (a U-turn) is composed.
   int queue_size = 200;
-  std::string camera_info_topic;   ///< default: next to image_topic
+  std::string camera_info_topic;  ///< default: next to image_topic
   std::string motion_topic = "/mosaic/motion";
   std::string odometry_topic = "/mosaic/odometry";
   std::string camera_height_topic = "/mosaic/camera_height";
@@ -37,7 +37,7 @@ struct TileWriterNodeConfig {
   std::string tile_topic = "/mosaic/tile";
   std::string preview_topic = "/mosaic/preview";
   std::string footprints_topic = "/mosaic/tile_footprints";
-  std::string frame_id = "utm";  ///< frame of the footprints and tiles
+  std::string frame_id = "utm";   ///< frame of the footprints and tiles
   std::string map_frame = "map";  ///< markers are drawn in this frame when map_origin is known (rviz: single precision)
   double preview_period_s = 1.0;
   int preview_max_side_px = 800;
@@ -48,8 +48,8 @@ struct TileWriterNodeConfig {
   // Synchronisation and life cycle.
   double sync_timeout_s = 10.0;  // the chain may lag behind the images by seconds on a replay
   int max_pending_frames = 300;
-  double clock_jump_s = 1.0;    ///< an image older than the newest by this much restarts the mosaic (bag loop)
-  double exit_when_idle_s = 0;  ///< > 0: flush and shut down after this many wall seconds without input (replays)
+  double clock_jump_s = 1.0;      ///< an image older than the newest by this much restarts the mosaic (bag loop)
+  double exit_when_idle_s = 0;    ///< > 0: flush and shut down after this many wall seconds without input (replays)
   int max_failed_tiles_kept = 2;  ///< closed mosaics kept in memory for a retry after a write failure
   double retry_period_s = 10.0;
 };

@@ -82,6 +82,11 @@ class TileWriterRos {
   void publishPreview();
   void onTimer();
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// Why no tile was written, in one line (empty when one was).
+  std::string noTileReason();
+  /// <output_dir>/run_summary.json: tiles written, images received and composed, and noTileReason(); logged as an
+  /// error when no tile was written. Called once the writer thread has stopped.
+  void writeRunSummary();
   void reject(const std::string& why);
 
   ros::NodeHandle nh_, private_nh_;
@@ -112,6 +117,9 @@ class TileWriterRos {
       std::make_shared<const registration::ImageUndistorter>();
   std::optional<int> utm_zone_;
   bool northern_ = true;
+  /// The fused poses' frame when it is not the UTM frame (~frame_id): the dive is not geo-referenced and the tiles are
+  /// written in that local metric frame. Guarded by write_mutex_.
+  std::string local_frame_;
   std::optional<Eigen::Vector2d> map_origin_en_m_;
   ros::WallTime last_input_wall_;
   ros::WallTime last_preview_wall_;  // per instance: several tile writers (nodelets) can share a process
@@ -135,6 +143,7 @@ class TileWriterRos {
 
   // Counters for /diagnostics.
   std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;
+  std::int64_t poses_ = 0, camera_heights_ = 0;  ///< fused poses and camera heights received
   std::int64_t tiles_written_ = 0, write_failures_ = 0, tiles_dropped_ = 0, udp_failures_ = 0;
   std::string last_problem_, last_write_error_;
 };

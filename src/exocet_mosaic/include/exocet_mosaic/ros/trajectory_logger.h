@@ -36,8 +36,8 @@
 #include <ros/ros.h>
 #include <sensor_msgs/NavSatFix.h>
 
-#include "exocet_mosaic/ros/dive_topics.h"
 #include "exocet_mosaic/dive/dive_records.h"
+#include "exocet_mosaic/ros/dive_topics.h"
 
 namespace exocet_mosaic {
 
