@@ -431,6 +431,75 @@ TEST(KltRegistrar, FailsOnTooLargeMotionAndOnAModelThatDoesNotFit) {
   EXPECT_LT(cornerTransferError_px(e.pixel_matrix, tilted.truth_ab, kWidth, kHeight), 0.1);
 }
 
+TEST(KltRegistrar, LargeMotionsWithoutPredictionAreFoundByTheCoarseSearch) {
+  // 4 degrees and 43 px with no prediction: beyond the 3-level pyramid's reach, most tracks are lost or wrong.
+  const Eigen::Matrix3d truth = similarityAboutCentre(4.0 * M_PI / 180.0, 1.0, 43.0, 0.0, kWidth, kHeight);
+  const testing::WarpedPair pair = makeWarpedPair(picture(), truth, kWidth, kHeight, 1.0);
+  KltConfig local_only = configFor(MotionModel::kHomography);
+  local_only.coarse_search = false;
+  KltRegistrar without(local_only);
+  const MotionEstimate refused = without.registerPair(pair.a, pair.b);
+  EXPECT_TRUE(refused.failed) << "the local tracker alone reaches this far: the case no longer tests the search";
+  KltRegistrar with(configFor(MotionModel::kHomography));
+  const MotionEstimate found = with.registerPair(pair.a, pair.b);
+  ASSERT_FALSE(found.failed) << toString(found.failure) << ": " << found.failure_detail;
+  EXPECT_TRUE(with.lastDiagnostics().coarse_found);
+  EXPECT_LT(cornerTransferError_px(found.pixel_matrix, truth, kWidth, kHeight), 0.1);
+  EXPECT_GT(found.inliers, 50);
+  std::printf("[ info ] 4 deg / 43 px without prediction: %d inliers, corner error %.4f px, search %.1f ms\n",
+              found.inliers, cornerTransferError_px(found.pixel_matrix, truth, kWidth, kHeight),
+              with.lastDiagnostics().coarse_ms);
+
+  // Motions up to a third of the image width, in every direction, with rotations and a scale change; through
+  // registerNext as well (the sequence path), where a failed pair must not spoil the next one.
+  KltRegistrar sequence(configFor(MotionModel::kHomography));
+  int k = 0;
+  double worst_similarity_px = 0.0, worst_homography_px = 0.0;
+  for (const double fraction : {0.15, 0.25, 1.0 / 3.0}) {
+    for (const double direction_deg : {0.0, 135.0, 250.0}) {
+      const double shift_px = fraction * kWidth;
+      const double a = direction_deg * M_PI / 180.0;
+      const double rotation = ((k % 3) - 1) * 6.0 * M_PI / 180.0;
+      const Eigen::Matrix3d big = similarityAboutCentre(
+          rotation, 1.0 + 0.02 * ((k % 2) ? 1 : -1), shift_px * std::cos(a), shift_px * std::sin(a), kWidth, kHeight);
+      ++k;
+      SCOPED_TRACE("shift " + std::to_string(shift_px) + " px towards " + std::to_string(direction_deg) + " deg");
+      const testing::WarpedPair far = makeWarpedPair(picture(), big, kWidth, kHeight, 1.0, 0, 10 + k);
+      // The similarity, the truth's model: 0.1 px; the homography's eight parameters, fitted on the overlap (down to
+      // half the image), extrapolate to the far corners less well.
+      KltRegistrar registrar(configFor(MotionModel::kSimilarity));
+      const MotionEstimate e = registrar.registerPair(far.a, far.b);
+      ASSERT_FALSE(e.failed) << toString(e.failure) << ": " << e.failure_detail;
+      EXPECT_LT(cornerTransferError_px(e.pixel_matrix, big, kWidth, kHeight), 0.1);
+      sequence.reset();
+      sequence.registerNext(far.a);
+      const MotionEstimate next = sequence.registerNext(far.b);
+      ASSERT_FALSE(next.failed) << toString(next.failure) << ": " << next.failure_detail;
+      EXPECT_LT(cornerTransferError_px(next.pixel_matrix, big, kWidth, kHeight), 0.3);
+      worst_similarity_px = std::max(worst_similarity_px, cornerTransferError_px(e.pixel_matrix, big, kWidth, kHeight));
+      worst_homography_px =
+          std::max(worst_homography_px, cornerTransferError_px(next.pixel_matrix, big, kWidth, kHeight));
+    }
+  }
+  std::printf(
+      "[ info ] shifts up to a third of the width, rotations to 6 deg: worst corner error %.4f px (similarity), "
+      "%.4f px (homography, sequence path)\n",
+      worst_similarity_px, worst_homography_px);
+}
+
+TEST(KltRegistrar, TheCoarseSearchDoesNotMakeUnrelatedImagesMatch) {
+  KltRegistrar registrar;
+  const cv::Mat a = sampleImage(seabedPicture(1024, 7), Eigen::Matrix3d::Identity(), kWidth, kHeight);
+  const cv::Mat b = sampleImage(seabedPicture(1024, 99), Eigen::Matrix3d::Identity(), kWidth, kHeight);
+  const MotionEstimate e = registrar.registerPair(a, b);
+  EXPECT_TRUE(e.failed);
+  EXPECT_TRUE(registrar.lastDiagnostics().coarse_searched);
+  EXPECT_NE(e.failure_detail.find("coarse search"), std::string::npos) << e.failure_detail;
+  KltConfig bad;
+  bad.coarse.ratio = 0.0;
+  EXPECT_NE(bad.validate().find("coarse: ratio"), std::string::npos) << bad.validate();
+}
+
 TEST(KltRegistrar, ReportsInvalidInputAndNoPreviousFrame) {
   KltRegistrar registrar;
   const testing::WarpedPair pair =

@@ -169,6 +169,8 @@ std::string KltConfig::validate() const {
   check(min_residual_scale_px > 0.0 && min_residual_scale_px <= 10.0, "min_residual_scale_px", "(0, 10]");
   check(max_residual_px > 0.0 && max_residual_px <= 100.0, "max_residual_px", "(0, 100]");
   check(max_local_residual_px > 0.0 && max_local_residual_px <= 100.0, "max_local_residual_px", "(0, 100]");
+  const std::string coarse_error = coarse.validate();
+  if (!coarse_error.empty()) errors << (errors.tellp() > 0 ? "; " : "") << "coarse: " << coarse_error;
   check(covariance_inflation >= 1.0 && covariance_inflation <= 100.0, "covariance_inflation", "[1, 100]");
   check(max_motion_fraction > 0.0 && max_motion_fraction <= 10.0, "max_motion_fraction", "(0, 10]");
   check(min_mean_grey >= 0.0 && min_mean_grey <= 255.0, "min_mean_grey", "[0, 255]");
@@ -578,8 +580,44 @@ void KltRegistrar::trackBackward(Frame* from, const Frame& to, int levels, const
   for (uchar& s : back_status_) s = s == 2;
 }
 
-void KltRegistrar::estimate(Frame* previous_frame, Frame* current, const Eigen::Matrix3d& prediction_px,
+void KltRegistrar::estimate(Frame* previous, Frame* current, const Eigen::Matrix3d& prediction_px,
                             MotionEstimate* result) {
+  estimateFrom(previous, current, prediction_px, result);
+  const FailureReason f = result->failure;
+  if (!config_.coarse_search || !result->failed ||
+      !(f == FailureReason::kTooFewTracks || f == FailureReason::kTooFewInliers || f == FailureReason::kInconsistent))
+    return;
+  diagnostics_.coarse_searched = true;
+  const CoarseMotion coarse = coarseMotionSearch(previous->images[0], current->images[0], config_.coarse);
+  diagnostics_.coarse_ms = coarse.elapsed_ms;
+  if (!coarse.found) {
+    result->failure_detail += "; no coarse search result either: " + coarse.detail;
+    return;
+  }
+  // From (nearly) the same start the tracks would fail the same way.
+  const int width = current->size.width, height = current->size.height;
+  double moved_px = 0.0;
+  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(width - 1.0, 0.0),
+                                        Eigen::Vector2d(0.0, height - 1.0), Eigen::Vector2d(width - 1.0, height - 1.0)})
+    moved_px =
+        std::max(moved_px, (transferPoint(coarse.pixel_matrix, corner) - transferPoint(prediction_px, corner)).norm());
+  if (moved_px < config_.window_px / 2.0) {
+    result->failure_detail += "; the coarse search agrees with the prediction (" + coarse.detail + ")";
+    return;
+  }
+  diagnostics_.coarse_found = true;
+  MotionEstimate retry = emptyEstimate(current->size);
+  estimateFrom(previous, current, coarse.pixel_matrix, &retry);
+  if (!retry.failed) {
+    *result = retry;
+    return;
+  }
+  result->failure_detail += "; tracked again from a coarse search (" + coarse.detail + "): " + toString(retry.failure) +
+                            ": " + retry.failure_detail;
+}
+
+void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eigen::Matrix3d& prediction_px,
+                                MotionEstimate* result) {
   const Frame& previous = *previous_frame;
   auto fail = [result](FailureReason reason, const std::string& detail) {
     result->failed = true;

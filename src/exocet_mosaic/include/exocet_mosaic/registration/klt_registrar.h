@@ -19,6 +19,11 @@
  * level(s) only (predicted_pyramid_levels), and, should too few of them come back (retrack_fraction), again on the
  * whole pyramid. Each backward track runs on the levels that the distance from its start to its feature calls for
  * (fb_fine_start_px).
+ *
+ * The pyramid reaches a few window sizes at its coarsest level: a larger motion that no prediction took out (a first
+ * pair, a jerk, a frame dropped) leaves most tracks lost or wrong. A pair that fails for want of tracks or inliers,
+ * or inconsistently, is then searched for globally (coarse_motion_search.h: SIFT on reduced copies, a similarity by
+ * RANSAC over the whole feature sets) and tracked again from where that search puts the features.
  */
 #pragma once
 
@@ -29,6 +34,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "exocet_mosaic/registration/coarse_motion_search.h"
 #include "exocet_mosaic/registration/frame_registrar.h"
 #include "exocet_mosaic/registration/motion_estimate.h"
 #include "exocet_mosaic/registration/motion_model.h"
@@ -104,8 +110,15 @@ struct KltConfig {
   /// (interpolation biases, blur); on the rendered benchmark dive the corner NEES says about 1.5 (homography model,
   /// the defaults), hence 1.6, slightly conservative (NEES ratio 0.94 there).
   double covariance_inflation = 1.6;
-  double max_motion_fraction = 0.5;  ///< an image corner moving further than this fraction of the image's smaller
-                                     ///< side: failure kMotionTooLarge, (0, 10]
+  /// An image corner moving further than this fraction of the image's smaller side: failure kMotionTooLarge, (0, 10].
+  /// A third of the width with a few degrees of rotation moves a corner of a 16:10 image by about 0.6 of its height.
+  double max_motion_fraction = 0.8;
+
+  // --- Large motions ---
+  /// A pair that fails with kTooFewTracks, kTooFewInliers or kInconsistent is tracked again from the motion a coarse
+  /// global search finds (when it finds one that differs from the prediction); false: the first failure stands.
+  bool coarse_search = true;
+  CoarseSearchConfig coarse;  ///< that search's parameters
 
   // --- Image quality (measured on the coarsest pyramid level) ---
   double min_mean_grey = 12.0;     ///< darker on average: failure kTooDark, [0, 255]
@@ -129,6 +142,9 @@ struct KltDiagnostics {
   bool prediction_trusted = false;  ///< the probes confirmed the prediction: most tracks on the fine levels only
   bool retracked = false;           ///< tracked again on the whole pyramid (KltConfig::retrack_fraction)
   double local_residual_px = 0.0;   ///< RobustFit::local_scale_px of the fit
+  bool coarse_searched = false;     ///< the pair failed and the coarse search ran
+  bool coarse_found = false;        ///< it found a motion, from which the pair was tracked again
+  double coarse_ms = 0.0;           ///< its time
 };
 
 /**
@@ -194,8 +210,11 @@ class KltRegistrar : public FrameRegistrar {
   void topUpFeatures(Frame* frame);
   /// Whether the surviving tracks have thinned out enough to detect again.
   bool needsDetection(const Frame& frame) const;
-  /// Registers `previous` (its features) to `current`, whose features it sets; both frames get derivatives.
+  /// Registers `previous` (its features) to `current`, whose features it sets; both frames get derivatives. A failure
+  /// for want of tracks or inliers, or an inconsistent one, is retried from a coarse search's motion.
   void estimate(Frame* previous, Frame* current, const Eigen::Matrix3d& prediction_px, MotionEstimate* result);
+  /// One attempt of estimate() from `prediction_px`.
+  void estimateFrom(Frame* previous, Frame* current, const Eigen::Matrix3d& prediction_px, MotionEstimate* result);
   /// Tracks the previous image's features forward into forward_ and status_, from where the prediction sends them:
   /// on the whole pyramid, or (with a prediction the probes confirm, and not whole_pyramid) mostly on the fine
   /// levels. Returns the coarsest level used.
