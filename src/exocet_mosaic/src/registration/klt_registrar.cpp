@@ -11,6 +11,8 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
+#include "exocet_mosaic/registration/rigid_scene_check.h"
+
 namespace exocet_mosaic {
 namespace registration {
 
@@ -169,6 +171,7 @@ std::string KltConfig::validate() const {
   check(min_residual_scale_px > 0.0 && min_residual_scale_px <= 10.0, "min_residual_scale_px", "(0, 10]");
   check(max_residual_px > 0.0 && max_residual_px <= 100.0, "max_residual_px", "(0, 100]");
   check(max_local_residual_px > 0.0 && max_local_residual_px <= 100.0, "max_local_residual_px", "(0, 100]");
+  check(rigid_k_sigma >= 1.0 && rigid_k_sigma <= 20.0, "rigid_k_sigma", "[1, 20]");
   const std::string coarse_error = coarse.validate();
   if (!coarse_error.empty()) errors << (errors.tellp() > 0 ? "; " : "") << "coarse: " << coarse_error;
   check(covariance_inflation >= 1.0 && covariance_inflation <= 100.0, "covariance_inflation", "[1, 100]");
@@ -664,11 +667,14 @@ void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eig
     for (size_t k = 0; k < to_.size(); ++k) backward_[k] = transfer(inverse_prediction, to_[k]);
     trackBackward(current, previous, levels, criteria);
     kept = 0;
+    fb_.clear();
     for (size_t k = 0; k < to_.size(); ++k) {
       const cv::Point2f d = backward_[k] - from_[k];
-      if (!back_status_[k] || !(d.x * d.x + d.y * d.y <= fb_sq)) continue;
+      const float d_sq = d.x * d.x + d.y * d.y;
+      if (!back_status_[k] || !(d_sq <= fb_sq)) continue;
       from_[kept] = from_[k];
       to_[kept++] = to_[k];
+      fb_.push_back(std::sqrt(d_sq));
     }
     from_.resize(kept);
     to_.resize(kept);
@@ -692,8 +698,43 @@ void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eig
   Eigen::VectorXd initial;
   if (!prediction_px.isIdentity(1e-12))
     initial = parametersFromPixelMatrix(config_.model, prediction_px, centre, width, height);
-  const RobustFit fit = fitter_.fit(from_, to_, centre, initial);
+  RobustFit fit = fitter_.fit(from_, to_, centre, initial);
   diagnostics_.fit_ms += msSince(start);
+  const bool one_plane =
+      fit.local_scale_px <= config_.max_local_residual_px && fit.residual_scale_px <= config_.max_residual_px;
+  if (fit.ok && !one_plane && config_.model == MotionModel::kHomography) {
+    // Not one plane: relief (parallax along the epipolar lines) or tracks that move on their own. One rigid scene
+    // tells them apart. (With a lower model a plane's perspective would pass as relief: its misfit is refused below.)
+    start = Clock::now();
+    const double sigma = trackingNoiseFromForwardBackward_px(fb_, config_.min_residual_scale_px);
+    RigidSceneConfig rigid_config;
+    rigid_config.k_sigma = config_.rigid_k_sigma;
+    const RigidSceneCheck rigid = checkRigidScene(from_, to_, sigma, rigid_config);
+    diagnostics_.rigid_checked = true;
+    diagnostics_.rigid_consistent = rigid.consistent_count;
+    diagnostics_.tracking_noise_px = sigma;
+    std::ostringstream not_plane;
+    not_plane << "neighbouring inliers disagree by " << fit.local_scale_px << " px (max_local_residual_px "
+              << config_.max_local_residual_px << "), residual scale " << fit.residual_scale_px
+              << " px (max_residual_px " << config_.max_residual_px << ")";
+    if (!rigid.estimated || rigid.consistent_count < config_.min_inliers ||
+        rigid.consistent_count < config_.min_inlier_fraction * static_cast<double>(kept)) {
+      diagnostics_.fit_ms += msSince(start);
+      return fail(FailureReason::kInconsistent, not_plane.str() + ", and " + rigid.detail +
+                                                    ": the tracks do not move with one rigid scene (particles, fish?)");
+    }
+    // The dominant plane from the scene's tracks only.
+    size_t n_scene = 0;
+    for (size_t k = 0; k < kept; ++k) {
+      if (!rigid.consistent[k]) continue;
+      from_[n_scene] = from_[k];
+      to_[n_scene++] = to_[k];
+    }
+    from_.resize(n_scene);
+    to_.resize(n_scene);
+    fit = fitter_.fit(from_, to_, centre, fit.parameters);
+    diagnostics_.fit_ms += msSince(start);
+  }
   diagnostics_.local_residual_px = fit.local_scale_px;
   result->parameters = fit.parameters;
   result->covariance = config_.covariance_inflation * fit.covariance;
@@ -714,11 +755,11 @@ void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eig
     return fail(FailureReason::kMotionTooLarge,
                 "an image corner moves " + std::to_string(largest_px) + " px (max_motion_fraction " +
                     std::to_string(config_.max_motion_fraction) + " allows " + std::to_string(bound_px) + " px)");
-  if (!(fit.residual_scale_px <= config_.max_residual_px))
+  if (!diagnostics_.rigid_checked && !(fit.residual_scale_px <= config_.max_residual_px))
     return fail(FailureReason::kInconsistent, "inlier residual scale " + std::to_string(fit.residual_scale_px) +
                                                   " px (max_residual_px " + std::to_string(config_.max_residual_px) +
-                                                  ")");
-  if (!(fit.local_scale_px <= config_.max_local_residual_px))
+                                                  "): the " + toString(config_.model) + " model does not fit");
+  if (!diagnostics_.rigid_checked && !(fit.local_scale_px <= config_.max_local_residual_px))
     return fail(FailureReason::kInconsistent, "neighbouring inliers disagree by " + std::to_string(fit.local_scale_px) +
                                                   " px (max_local_residual_px " +
                                                   std::to_string(config_.max_local_residual_px) +

@@ -60,6 +60,7 @@ void readKlt(const SectionReader& s, registration::KltConfig* c) {
   s.number("consensus_threshold_px", &c->consensus_threshold_px);
   s.number("max_local_residual_px", &c->max_local_residual_px);
   s.number("covariance_inflation", &c->covariance_inflation);
+  s.number("rigid_k_sigma", &c->rigid_k_sigma);
   s.flag("coarse_search", &c->coarse_search);
   s.integer("coarse_width_px", &c->coarse.width_px);
   s.integer("coarse_min_inliers", &c->coarse.min_inliers);

@@ -101,11 +101,18 @@ struct KltConfig {
   double rejection_k = 4.0;             ///< a track is struck off beyond rejection_k * sigma, [2, 20]
   double min_residual_scale_px = 0.03;  ///< floor of sigma (covariance, rejection), (0, 10]
   double max_residual_px = 1.0;         ///< larger inlier residual scale: failure kInconsistent, (0, 100]
-  /// Larger difference between the residuals of neighbouring inliers (RobustFit::local_scale_px): failure
-  /// kInconsistent, (0, 100]. Tracks on the seabed err alike where the model errs (relief, lens distortion), so this
-  /// stays near the tracking noise (0.1-0.2 px) even when the residual scale does not; tracks on particles at
-  /// various depths (marine snow in turbid water) do not.
+  /// A pair whose neighbouring inliers disagree by more (RobustFit::local_scale_px) does not move as one plane,
+  /// (0, 100]: on a flat seabed the tracks err alike where the model errs (lens distortion), so this stays near the
+  /// tracking noise (0.1-0.2 px). With the homography model, such a pair, or one whose residual scale exceeds
+  /// max_residual_px, is not refused for it: it is checked against one rigid scene (rigid_scene_check.h: the epipolar
+  /// geometry within rigid_k_sigma times the tracking noise measured on its tracks). Relief passes, and the motion is
+  /// refitted on the tracks of the scene (the dominant plane's, its covariance from residuals that hold the parallax);
+  /// tracks that move on their own (drifting particles, fish) fail it, and so does a pair where they are too many
+  /// (kInconsistent). The lower models refuse such a pair (kInconsistent): a plane's perspective, which they cannot
+  /// hold, would pass as relief.
   double max_local_residual_px = 0.3;
+  /// A track is on the rigid scene's epipolar geometry within this many tracking-noise sigmas, [1, 20].
+  double rigid_k_sigma = 3.0;
   /// Factor on the fit's covariance, [1, 100]: the residuals do not show the errors that all tracks share
   /// (interpolation biases, blur); on the rendered benchmark dive the corner NEES says about 1.5 (homography model,
   /// the defaults), hence 1.6, slightly conservative (NEES ratio 0.94 there).
@@ -142,6 +149,9 @@ struct KltDiagnostics {
   bool prediction_trusted = false;  ///< the probes confirmed the prediction: most tracks on the fine levels only
   bool retracked = false;           ///< tracked again on the whole pyramid (KltConfig::retrack_fraction)
   double local_residual_px = 0.0;   ///< RobustFit::local_scale_px of the fit
+  bool rigid_checked = false;       ///< the pair did not move as one plane and was checked for one rigid scene
+  int rigid_consistent = 0;         ///< tracks on that scene's epipolar geometry
+  double tracking_noise_px = 0.0;   ///< the tracking noise measured from the forward-backward distances then
   bool coarse_searched = false;     ///< the pair failed and the coarse search ran
   bool coarse_found = false;        ///< it found a motion, from which the pair was tracked again
   double coarse_ms = 0.0;           ///< its time
@@ -240,6 +250,7 @@ class KltRegistrar : public FrameRegistrar {
   std::vector<float> probe_misses_;
   std::vector<uchar> is_probe_;
   std::vector<float> error_;
+  std::vector<float> fb_;  ///< forward-backward distances of the kept tracks
   std::vector<int> kept_;
   cv::Mat eigen_;
   std::vector<cv::Rect> rois_;
