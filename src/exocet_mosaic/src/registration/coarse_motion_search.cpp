@@ -6,8 +6,9 @@
 #include <vector>
 
 #include <opencv2/calib3d.hpp>
-#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include "exocet_mosaic/registration/sift_reference.h"
 
 namespace exocet_mosaic {
 namespace registration {
@@ -45,22 +46,10 @@ CoarseMotion coarseMotionSearch(const cv::Mat& a, const cv::Mat& b, const Coarse
     cv::resize(a, small_a, cv::Size(), scale, scale, cv::INTER_AREA);
     cv::resize(b, small_b, cv::Size(), scale, scale, cv::INTER_AREA);
   }
-  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(config.max_features, 3, config.contrast_threshold, 10.0, 1.6);
-  std::vector<cv::KeyPoint> ka, kb;
-  cv::Mat da, db;
-  sift->detectAndCompute(small_a, cv::noArray(), ka, da);
-  sift->detectAndCompute(small_b, cv::noArray(), kb, db);
-  if (da.rows < 2 || db.rows < 2)
-    return done("too few SIFT features (" + std::to_string(da.rows) + " and " + std::to_string(db.rows) + ")");
-  std::vector<std::vector<cv::DMatch>> knn;
-  cv::BFMatcher(cv::NORM_L2).knnMatch(da, db, knn, 2);
   std::vector<cv::Point2f> pa, pb;
-  for (const auto& m : knn) {
-    if (m.size() == 2 && m[0].distance < config.ratio * m[1].distance) {
-      pa.push_back(ka[m[0].queryIdx].pt);
-      pb.push_back(kb[m[0].trainIdx].pt);
-    }
-  }
+  const int features =
+      siftRatioMatches(small_a, small_b, config.max_features, config.contrast_threshold, config.ratio, &pa, &pb);
+  if (features < 2) return done("too few SIFT features (" + std::to_string(features) + ")");
   out.matches = static_cast<int>(pa.size());
   if (out.matches < config.min_inliers)
     return done(std::to_string(out.matches) + " SIFT matches (min_inliers " + std::to_string(config.min_inliers) + ")");

@@ -702,7 +702,10 @@ void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eig
   diagnostics_.fit_ms += msSince(start);
   const bool one_plane =
       fit.local_scale_px <= config_.max_local_residual_px && fit.residual_scale_px <= config_.max_residual_px;
+  // Per attempt (estimate() may retry from a coarse search): whether the rigid scene, not one plane, accepted it.
+  bool rigid_scene = false;
   if (fit.ok && !one_plane && config_.model == MotionModel::kHomography) {
+    rigid_scene = true;
     // Not one plane: relief (parallax along the epipolar lines) or tracks that move on their own. One rigid scene
     // tells them apart. (With a lower model a plane's perspective would pass as relief: its misfit is refused below.)
     start = Clock::now();
@@ -755,11 +758,11 @@ void KltRegistrar::estimateFrom(Frame* previous_frame, Frame* current, const Eig
     return fail(FailureReason::kMotionTooLarge,
                 "an image corner moves " + std::to_string(largest_px) + " px (max_motion_fraction " +
                     std::to_string(config_.max_motion_fraction) + " allows " + std::to_string(bound_px) + " px)");
-  if (!diagnostics_.rigid_checked && !(fit.residual_scale_px <= config_.max_residual_px))
+  if (!rigid_scene && !(fit.residual_scale_px <= config_.max_residual_px))
     return fail(FailureReason::kInconsistent, "inlier residual scale " + std::to_string(fit.residual_scale_px) +
                                                   " px (max_residual_px " + std::to_string(config_.max_residual_px) +
                                                   "): the " + toString(config_.model) + " model does not fit");
-  if (!diagnostics_.rigid_checked && !(fit.local_scale_px <= config_.max_local_residual_px))
+  if (!rigid_scene && !(fit.local_scale_px <= config_.max_local_residual_px))
     return fail(FailureReason::kInconsistent, "neighbouring inliers disagree by " + std::to_string(fit.local_scale_px) +
                                                   " px (max_local_residual_px " +
                                                   std::to_string(config_.max_local_residual_px) +

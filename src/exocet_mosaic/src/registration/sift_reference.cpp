@@ -1,5 +1,6 @@
 #include "exocet_mosaic/registration/sift_reference.h"
 
+#include <algorithm>
 #include <vector>
 
 #include <opencv2/calib3d.hpp>
@@ -8,24 +9,32 @@
 namespace exocet_mosaic {
 namespace registration {
 
-SiftReference siftReferenceHomography(const cv::Mat& a, const cv::Mat& b) {
-  SiftReference ref;
-  // A low contrast threshold: seabed texture is faint, and the default (0.04) keeps only a few dozen points of a
-  // 384x288 Sparus frame, too few for a sub-pixel reference; 0.005 keeps about two thousand.
-  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(0, 3, 0.005, 10.0, 1.6);
+int siftRatioMatches(const cv::Mat& a, const cv::Mat& b, int max_features, double contrast_threshold, double ratio,
+                     std::vector<cv::Point2f>* pa, std::vector<cv::Point2f>* pb) {
+  pa->clear();
+  pb->clear();
+  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(max_features, 3, contrast_threshold, 10.0, 1.6);
   std::vector<cv::KeyPoint> ka, kb;
   cv::Mat da, db;
   sift->detectAndCompute(a, cv::noArray(), ka, da);
   sift->detectAndCompute(b, cv::noArray(), kb, db);
-  if (da.empty() || db.empty()) return ref;
+  if (da.rows < 2 || db.rows < 2) return std::min(da.rows, db.rows);
   std::vector<std::vector<cv::DMatch>> knn;
   cv::BFMatcher(cv::NORM_L2).knnMatch(da, db, knn, 2);
-  std::vector<cv::Point2f> pa, pb;
   for (const auto& m : knn)
-    if (m.size() == 2 && m[0].distance < 0.8f * m[1].distance) {
-      pa.push_back(ka[m[0].queryIdx].pt);
-      pb.push_back(kb[m[0].trainIdx].pt);
+    if (m.size() == 2 && m[0].distance < ratio * m[1].distance) {
+      pa->push_back(ka[m[0].queryIdx].pt);
+      pb->push_back(kb[m[0].trainIdx].pt);
     }
+  return std::min(da.rows, db.rows);
+}
+
+SiftReference siftReferenceHomography(const cv::Mat& a, const cv::Mat& b) {
+  SiftReference ref;
+  // A low contrast threshold: seabed texture is faint, and the default (0.04) keeps only a few dozen points of a
+  // 384x288 Sparus frame, too few for a sub-pixel reference; 0.005 keeps about two thousand.
+  std::vector<cv::Point2f> pa, pb;
+  siftRatioMatches(a, b, 0, 0.005, 0.8, &pa, &pb);
   ref.matches = int(pa.size());
   if (pa.size() < 20) return ref;
   cv::Mat mask;

@@ -6,6 +6,8 @@
  */
 #pragma once
 
+#include <vector>
+
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
@@ -15,9 +17,17 @@ namespace registration {
 struct SiftReference {
   bool found = false;
   Eigen::Matrix3d pixel_matrix = Eigen::Matrix3d::Identity();  ///< x_B ~ pixel_matrix x_A
-  int matches = 0;   ///< ratio-test matches
-  int inliers = 0;   ///< RANSAC inliers (1 px)
+  int matches = 0;                                             ///< ratio-test matches
+  int inliers = 0;                                             ///< RANSAC inliers (1 px)
 };
+
+/**
+ * SIFT features of `a` and `b` (8-bit grey; at most max_features each, 0: all; OpenCV's contrast threshold) matched
+ * by Lowe's ratio test: the matched points of `a` in pa, of `b` in pb (cleared first). Returns the smaller feature
+ * count of the two images.
+ */
+int siftRatioMatches(const cv::Mat& a, const cv::Mat& b, int max_features, double contrast_threshold, double ratio,
+                     std::vector<cv::Point2f>* pa, std::vector<cv::Point2f>* pb);
 
 /// The reference homography from `a` to `b` (8-bit grey); found = false with fewer than 20 matches.
 SiftReference siftReferenceHomography(const cv::Mat& a, const cv::Mat& b);
