@@ -116,6 +116,8 @@ class FusionFrontEnd {
   void setOperatorStart(const Eigen::Vector2d& camera_en_m, double sigma_m);
   /// ENU yaw of base_link (counter-clockwise from east), used while no attitude sensor speaks.
   void setOperatorHeading(double enu_yaw_rad) { operator_heading_rad_ = enu_yaw_rad; }
+  /// The operator's heading as the images' rotation has carried it on so far (ENU yaw, rad); empty when not set.
+  const std::optional<double>& operatorHeading() const { return operator_heading_rad_; }
   /// Height of the camera above the seabed (m), used while no altimeter speaks.
   void setOperatorHeight(double camera_height_m) { operator_height_m_ = camera_height_m; }
   /// Starts the filter now at a given position and covariance (m^2), e.g. a re-seed, or a benchmark's start.
