@@ -25,11 +25,13 @@
 #include <rosbag/view.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/Range.h>
 #include <tf2_msgs/TFMessage.h>
 #include <yaml-cpp/yaml.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/json_file.h"
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/ros/dive_bag_writer.h"
 #include "exocet_mosaic/ros/dive_topics.h"
@@ -129,6 +131,8 @@ struct BagContents {
   std::vector<exocet_msgs::Depth> depths;
   std::vector<exocet_msgs::GeoDatum> datums;
   std::vector<tf2_msgs::TFMessage> tf_static;
+  std::vector<sensor_msgs::Range> altitudes;
+  std::vector<std::string> topics;     ///< every connection's topic
   std::vector<double> record_times_s;  ///< in file order
 };
 
@@ -153,6 +157,7 @@ BagContents readBag(const std::string& path) {
     EXPECT_FALSE(connection->datatype.empty()) << connection->topic << ": connection record has no type";
     EXPECT_FALSE(connection->md5sum.empty()) << connection->topic << ": connection record has no md5sum";
     EXPECT_FALSE(connection->msg_def.empty()) << connection->topic << ": connection record has no definition";
+    c.topics.push_back(connection->topic);
   }
   for (const rosbag::MessageInstance& m : view) {
     c.record_times_s.push_back(m.getTime().toSec());
@@ -163,6 +168,7 @@ BagContents readBag(const std::string& path) {
     if (topic == topics::kNavDepth) take(m, &c.depths);
     if (topic == topics::kNavDatum) take(m, &c.datums);
     if (topic == topics::kTfStatic) take(m, &c.tf_static);
+    if (topic == topics::kNavAltitude) take(m, &c.altitudes);
   }
   return c;
 }
@@ -320,7 +326,12 @@ TEST(DiveImportSparus, ToolRoundTripIsExact) {
   EXPECT_NE(run.out.find("22 frames, 50 nav rows"), std::string::npos) << run.out;
   EXPECT_NE(run.out.find(output), std::string::npos) << run.out;
   EXPECT_NE(run.err.find("1 frame(s) before the first navigation row"), std::string::npos) << run.err;
-  EXPECT_EQ(dir.files(), std::vector<std::string>{"sparus_tool.bag"});
+  EXPECT_NE(run.out.find("rosrun exocet_mosaic replay_dive " + output + " " + (dir / "sparus_tool_tiles") +
+                         " ground_truth:=false\n"),
+            std::string::npos)
+      << run.out;
+  EXPECT_NE(run.out.find("camera_height_m:="), std::string::npos) << "no altitude: the output says what to give";
+  EXPECT_EQ(dir.files(), (std::vector<std::string>{"sparus_tool.bag", "sparus_tool.bag.replay.json"}));
   expectSparusBag(output);
 }
 
@@ -479,6 +490,242 @@ TEST(DiveImportFrames, IndexByFrameNumberAndRate) {
   expectImportError([&] { dive::frameTimesFromIndex(images, dir / "short_index.csv"); },
                     dive::DiveImportError::Kind::kInput, {"img_1.png", "has no row"});
   expectImportError([&] { dive::frameTimesFromRate(images, 50.0, 0.0); }, dive::DiveImportError::Kind::kInput, {"--fps"});
+}
+
+// ------------------------------------------------------------------------------------------------------------
+// A dive without navigation: --altitude (constant or CSV), --heading, the start point and the replay's arguments.
+
+/// Arguments of a dive without navigation: three noise images timed 100, 100.25, 100.5 s, the Sparus camera.
+std::vector<std::string> noNavArgs(const TempDir& dir, const std::string& altitude) {
+  return {"--images",     dir / "images",
+          "--start-time", "100",
+          "--fps",        "4",
+          "--camera",     kSparus + "/camera_intrinsics.yaml",
+          "--altitude",   altitude,
+          "--output",     dir / "out.bag"};
+}
+
+TEST(DiveImportNoNav, AltitudeArgument) {
+  const dive::AltitudeOption constant = dive::parseAltitudeOption("3");
+  ASSERT_TRUE(constant.constant_m);
+  EXPECT_EQ(*constant.constant_m, 3.0);
+  EXPECT_TRUE(constant.csv_path.empty());
+  EXPECT_EQ(*dive::parseAltitudeOption("1000").constant_m, 1000.0);
+  EXPECT_EQ(*dive::parseAltitudeOption("0.05").constant_m, 0.05);
+  const dive::AltitudeOption csv = dive::parseAltitudeOption("/data/dive 1/alt.csv");
+  EXPECT_FALSE(csv.constant_m);
+  EXPECT_EQ(csv.csv_path, "/data/dive 1/alt.csv");
+  EXPECT_EQ(csv.csv_column, "");
+  const dive::AltitudeOption named = dive::parseAltitudeOption("logs/ALT.CSV:height_m");
+  EXPECT_EQ(named.csv_path, "logs/ALT.CSV");
+  EXPECT_EQ(named.csv_column, "height_m");
+  for (const std::string bad : {"0", "-2", "1000.5", "nan", "inf"})
+    expectImportError([&] { dive::parseAltitudeOption(bad); }, dive::DiveImportError::Kind::kInput,
+                      {"--altitude", "(0, 1000] m"});
+  for (const std::string bad : {"3m", "alt.txt", "alt.csv:", ""})
+    expectImportError([&] { dive::parseAltitudeOption(bad); }, dive::DiveImportError::Kind::kInput, {"--altitude"});
+  expectImportError([&] { dive::parseAltitudeOption("3m"); }, dive::DiveImportError::Kind::kInput,
+                    {"FILE.csv", "(0, 1000] m"});
+}
+
+TEST(DiveImportNoNav, CommandLine) {
+  TempDir dir;
+  const dive::DiveImportOptions o = dive::parseDiveImportArguments(noNavArgs(dir, "2.5"));
+  EXPECT_TRUE(o.nav_path.empty());
+  ASSERT_TRUE(o.altitude && o.altitude->constant_m);
+  EXPECT_EQ(*o.altitude->constant_m, 2.5);
+  EXPECT_FALSE(o.heading_deg);
+  const auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = noNavArgs(dir, "2.5");
+    args.insert(args.end(), extra.begin(), extra.end());
+    return args;
+  };
+  const dive::DiveImportOptions start =
+      dive::parseDiveImportArguments(with({"--origin-lat", "39.55", "--origin-lon", "2.62", "--heading=-360"}));
+  ASSERT_TRUE(start.origin && start.heading_deg);
+  EXPECT_EQ(start.origin->latitude_deg, 39.55);
+  EXPECT_EQ(*start.heading_deg, -360.0);
+  EXPECT_EQ(*dive::parseDiveImportArguments(with({"--heading", "360"})).heading_deg, 360.0);
+  const auto expectUsage = [&](const std::vector<std::string>& args, const std::vector<std::string>& parts) {
+    expectImportError([&] { dive::parseDiveImportArguments(args); }, dive::DiveImportError::Kind::kInput, parts);
+  };
+  expectUsage(with({"--heading", "360.5"}), {"--heading", "[-360, 360]"});
+  expectUsage(with({"--heading", "north"}), {"--heading", "not a number"});
+  expectUsage(replaceArg(noNavArgs(dir, "2.5"), "--altitude", "1001"), {"--altitude", "(0, 1000] m"});
+  // Without --nav, --altitude is required; with --nav, --altitude and --heading conflict with the CSV.
+  std::vector<std::string> no_altitude = noNavArgs(dir, "2.5");
+  no_altitude.erase(no_altitude.begin() + 8, no_altitude.begin() + 10);
+  expectUsage(no_altitude, {"--altitude is required without --nav", "(0, 1000]", "FILE.csv"});
+  std::vector<std::string> nav = sparusArgs(dir / "out.bag");
+  nav.insert(nav.end(), {"--altitude", "3"});
+  expectUsage(nav, {"--altitude cannot be combined with --nav"});
+  nav = sparusArgs(dir / "out.bag");
+  nav.insert(nav.end(), {"--heading", "10"});
+  expectUsage(nav, {"--heading cannot be combined with --nav"});
+}
+
+TEST(DiveImportNoNav, MissingCameraSaysHowToGetIt) {
+  TempDir dir;
+  writeNoiseImages(dir / "images");
+  std::vector<std::string> args = noNavArgs(dir, "2.5");
+  args.erase(args.begin() + 6, args.begin() + 8);  // --camera
+  const std::vector<std::string> parts = {"--camera is required", "rosrun exocet_mosaic self_calibrate --images DIR",
+                                          "--output camera.yaml", "--bag BAG", "mosaic_video"};
+  expectImportError([&] { dive::parseDiveImportArguments(args); }, dive::DiveImportError::Kind::kInput, parts);
+  const RunResult run = runTool(args, dir);
+  EXPECT_EQ(run.exit_code, 2);
+  for (const auto& part : parts) EXPECT_NE(run.err.find(part), std::string::npos) << run.err;
+  EXPECT_EQ(dir.files(), std::vector<std::string>{"images"});
+}
+
+TEST(DiveImportNoNav, AltitudeCsv) {
+  TempDir dir;
+  writeText(dir / "alt.csv", "# altimeter log\nstamp,source,height_m\n10,a,2\n11,b,\n12,c,4\n");
+  const dive::AltitudeTable table = dive::readAltitudeCsv(dir / "alt.csv", "HEIGHT_M");
+  EXPECT_EQ(table.time_column, "stamp");
+  EXPECT_EQ(table.altitude_column, "height_m");
+  ASSERT_EQ(table.rows.size(), 2u);  // the empty cell is no measurement
+  EXPECT_EQ(table.at(9.0), 2.0);
+  EXPECT_EQ(table.at(10.0), 2.0);
+  EXPECT_NEAR(table.at(11.5), 3.5, 1e-12);
+  EXPECT_EQ(table.at(13.0), 4.0);
+  for (const auto& row : table.rows) EXPECT_TRUE(row.min_range_m <= 2.0 && row.max_range_m >= 4.0);
+  writeText(dir / "default.csv", "t_unix_s,altitude_m\n10,2\n");
+  EXPECT_EQ(dive::readAltitudeCsv(dir / "default.csv", "").rows.at(0).range_m, 2.0);
+  const auto expectCsvError = [&](const std::string& text, const std::string& column,
+                                  const std::vector<std::string>& parts) {
+    writeText(dir / "bad.csv", text);
+    expectImportError([&] { dive::readAltitudeCsv(dir / "bad.csv", column); }, dive::DiveImportError::Kind::kInput,
+                      parts);
+  };
+  expectCsvError("t,altitude\n10,2\n10,3\n", "", {"--altitude", "line 3, column 't'", "must increase"});
+  expectCsvError("t,altitude\n10,2\n11,0\n", "", {"--altitude", "line 3, column 'altitude'", "(0, 1000] m"});
+  expectCsvError("t,altitude\n10,2\n11,1200\n", "", {"line 3", "(0, 1000] m"});
+  expectCsvError("t,altitude\n10,abc\n", "", {"line 2, column 'altitude'", "not a number"});
+  expectCsvError("t,height\n10,2\n", "", {"no altitude column", "altitude or altitude_m", "FILE.csv:COLUMN"});
+  expectCsvError("t,height\n10,2\n", "depth", {"no altitude column", "depth"});
+  expectCsvError("when,altitude\n10,2\n", "", {"no time column", "t_unix_s, t, time, stamp, ts"});
+  expectCsvError("t,altitude\n10,\n", "", {"no row has an altitude"});
+}
+
+/// The checks common to the bags of a dive without navigation: three images, their camera_info, no odometry.
+void expectNoNavBag(const BagContents& bag) {
+  ASSERT_EQ(bag.images.size(), 3u);
+  ASSERT_EQ(bag.infos.size(), 3u);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(bag.images[k].header.stamp.toSec(), 100.0 + 0.25 * k, 1e-9);
+  EXPECT_TRUE(bag.odometry.empty());
+  EXPECT_TRUE(bag.depths.empty());
+  for (const auto& topic : bag.topics) {
+    EXPECT_NE(topic, topics::kNavOdometry);
+    EXPECT_NE(topic, topics::kNavDepth);
+  }
+  // base_link -> camera_optical, and base_link -> altimeter, where the fusion finds the altimeter.
+  ASSERT_EQ(bag.tf_static.size(), 1u);
+  ASSERT_EQ(bag.tf_static[0].transforms.size(), 2u);
+  EXPECT_EQ(bag.tf_static[0].transforms[1].header.frame_id, "base_link");
+  EXPECT_EQ(bag.tf_static[0].transforms[1].child_frame_id, "altimeter");
+  EXPECT_EQ(bag.tf_static[0].transforms[1].transform.rotation.w, 1.0);
+  for (const auto& a : bag.altitudes) {
+    EXPECT_EQ(a.header.frame_id, "altimeter");
+    EXPECT_EQ(a.radiation_type, sensor_msgs::Range::ULTRASOUND);
+    EXPECT_TRUE(a.min_range <= a.range && a.range <= a.max_range) << a.range;
+  }
+  for (size_t i = 1; i < bag.record_times_s.size(); ++i) EXPECT_LE(bag.record_times_s[i - 1], bag.record_times_s[i]);
+}
+
+/// The replay arguments of the sidecar beside `bag`, as name -> value.
+std::map<std::string, std::string> sidecarArguments(const std::string& bag) {
+  const auto json = exocet_common::readJsonObjectFile<nlohmann::json>(bag + ".replay.json");
+  std::map<std::string, std::string> out;
+  if (!json || !json->contains("replay_arguments")) {
+    ADD_FAILURE() << "no replay_arguments in " << bag << ".replay.json";
+    return out;
+  }
+  for (const auto& [name, value] : (*json)["replay_arguments"].items()) out[name] = value.get<std::string>();
+  return out;
+}
+
+TEST(DiveImportNoNav, ConstantAltitudeRoundTrip) {
+  TempDir dir;
+  writeNoiseImages(dir / "images");
+  const RunResult run = runTool(noNavArgs(dir, "2.5"), dir);
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_NE(run.out.find("3 frames, no navigation (3 altitude)"), std::string::npos) << run.out;
+  EXPECT_NE(run.err.find("no --heading"), std::string::npos) << run.err;
+  EXPECT_NE(run.out.find("rosrun exocet_mosaic replay_dive " + (dir / "out.bag") + " " + (dir / "out_tiles") +
+                         " ground_truth:=false fusion_preset:=images_only heading_deg:=0.0000\n"),
+            std::string::npos)
+      << run.out;
+  EXPECT_NE(run.out.find("local frame 'map'"), std::string::npos) << run.out;
+  EXPECT_EQ(dir.files(), (std::vector<std::string>{"images", "out.bag", "out.bag.replay.json"}));
+  const BagContents bag = readBag(dir / "out.bag");
+  expectNoNavBag(bag);
+  // One altitude at each image, the constant, stamped as the image; no datum without a start point.
+  ASSERT_EQ(bag.altitudes.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(bag.altitudes[k].header.stamp, bag.images[k].header.stamp);
+    EXPECT_FLOAT_EQ(bag.altitudes[k].range, 2.5f);
+  }
+  EXPECT_TRUE(bag.datums.empty());
+  const auto args = sidecarArguments(dir / "out.bag");
+  EXPECT_EQ(args, (std::map<std::string, std::string>{
+                      {"ground_truth", "false"}, {"fusion_preset", "images_only"}, {"heading_deg", "0.0000"}}));
+}
+
+TEST(DiveImportNoNav, AltitudeCsvWithStartPointRoundTrip) {
+  TempDir dir;
+  writeNoiseImages(dir / "images");
+  // Rows before, between and after the images (100, 100.25, 100.5 s); 130 s is beyond the 1 s margin: left out.
+  writeText(dir / "alt.csv", "time,altitude\n98.5,9\n99.5,2\n100,2\n100.5,3\n101.2,4\n130,5\n");
+  std::vector<std::string> args = noNavArgs(dir, dir / "alt.csv");
+  args.insert(args.end(), {"--origin-lat", "39.55", "--origin-lon", "2.62", "--heading", "10"});
+  const RunResult run = runTool(args, dir);
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const BagContents bag = readBag(dir / "out.bag");
+  expectNoNavBag(bag);
+  // The rows from 99.5 s (98.5 is more than 1 s before the first image) to 101.2 s, and the image at 100.25 s
+  // interpolated; the images at 100 and 100.5 s have a row at their stamp.
+  const std::vector<std::pair<double, double>> expected = {
+      {99.5, 2.0}, {100.0, 2.0}, {100.25, 2.5}, {100.5, 3.0}, {101.2, 4.0}};
+  ASSERT_EQ(bag.altitudes.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_NEAR(bag.altitudes[i].header.stamp.toSec(), expected[i].first, 1e-6) << i;
+    EXPECT_NEAR(bag.altitudes[i].range, expected[i].second, 1e-6) << i;
+  }
+  // The start point's zone on /nav/datum; the heading turned to grid north: at 2.62 E, west of zone 31's central
+  // meridian (3 E), grid north lies west of true north by atan(tan(0.38 deg) sin(39.55 deg)) = 0.242 deg.
+  ASSERT_EQ(bag.datums.size(), 1u);
+  EXPECT_EQ(bag.datums[0].epsg, 32631);
+  const auto replay = sidecarArguments(dir / "out.bag");
+  EXPECT_EQ(replay.at("fusion_preset"), "images_only");
+  EXPECT_EQ(replay.at("origin_lat"), "39.55000000");
+  EXPECT_EQ(replay.at("origin_lon"), "2.62000000");
+  const double convergence_deg = std::atan(std::tan(0.38 * M_PI / 180) * std::sin(39.55 * M_PI / 180)) * 180 / M_PI;
+  EXPECT_NEAR(std::stod(replay.at("heading_deg")), 10.0 + convergence_deg, 2e-4);
+  EXPECT_NE(run.out.find("origin_lat:=39.55000000 origin_lon:=2.62000000 heading_deg:=" + replay.at("heading_deg")),
+            std::string::npos)
+      << run.out;
+}
+
+TEST(DiveImportNoNav, ImagesOutsideTheAltitudeCsv) {
+  TempDir dir;
+  writeNoiseImages(dir / "images");
+  // The last image (100.5 s) is 1.1 s after the last row: beyond the 1 s margin; the one before is within it.
+  writeText(dir / "alt.csv", "t,altitude\n98,2\n99.4,2\n");
+  const auto args = noNavArgs(dir, dir / "alt.csv");
+  expectImportError([&] { prepare(args); }, dive::DiveImportError::Kind::kInput,
+                    {"--altitude", "img_2.png", "1.100 s after the last row", "1.0 s"});
+  const RunResult run = runTool(args, dir);
+  EXPECT_EQ(run.exit_code, 2);
+  EXPECT_NE(run.err.find("--altitude: image 'img_2.png'"), std::string::npos) << run.err;
+  EXPECT_EQ(dir.files(), (std::vector<std::string>{"alt.csv", "images"}));
+  // Within the margin the image takes the last row's value.
+  writeText(dir / "alt.csv", "t,altitude\n99,2\n99.6,3\n");
+  RecordingSink sink;
+  dive::writeDiveImport(prepare(args), &sink);
+  ASSERT_EQ(sink.altitudes.size(), 5u);  // 2 rows + 3 images
+  EXPECT_EQ(sink.altitudes.back().stamp_s, 100.5);
+  EXPECT_EQ(sink.altitudes.back().range_m, 3.0);
 }
 
 // ------------------------------------------------------------------------------------------------------------

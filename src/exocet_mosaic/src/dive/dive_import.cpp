@@ -296,6 +296,8 @@ const char kDiveImportDescription[] =
     "dive_import: imports a real dive (camera images + navigation CSV + camera intrinsics) into a bag with the\n"
     "layout of the simulator's: /camera/image_raw (or /camera/image_raw/compressed) + /camera/camera_info,\n"
     "/nav/odometry, /nav/depth, /nav/altitude, /nav/datum (geo-referenced dives), /tf_static.\n"
+    "Without --nav (video without navigation): images, camera_info, /tf_static and /nav/altitude from --altitude;\n"
+    "the start point (--origin-lat/--origin-lon, --heading) goes to the replay, whose command is printed.\n"
     "Frame times: --image-times, or --start-time (with --fps for a folder).";
 
 const char kDiveImportConventions[] = R"(Navigation CSV
@@ -317,13 +319,25 @@ const char kDiveImportConventions[] = R"(Navigation CSV
   An empty depth or altitude cell means no measurement on that row. Velocities are not imported: the twist
   covariance diagonal is -1 (unknown). NaN or infinite values are errors.
 
+Without --nav
+  --altitude M           one /nav/altitude (sensor_msgs/Range, frame altimeter, at base_link) at each image
+  --altitude FILE.csv[:COLUMN]
+                         time column as above (increasing) and the altitude column (default altitude or
+                         altitude_m; metres in (0, 1000]); one /nav/altitude per row within 1 s of the
+                         images, and one at each image, interpolated. The images must lie within the rows'
+                         time span give or take 1 s (there they take the nearest row's value).
+  No /nav/odometry, /nav/depth. The bag replays in the fusion's images-only mode: the tool prints the
+  command and writes OUT.bag.replay.json, which replay_dive reads (rosrun exocet_mosaic replay_dive OUT.bag
+  OUTDIR). With --origin-lat/--origin-lon the tiles are in that point's UTM zone, the start heading being
+  --heading (0 if not given); without them, in the local frame "map" (metres, x east, y north of --heading).
+
 Exit status: 0 done, 2 bad arguments or input (the message names the argument, file, line and column),
 1 I/O failure, 128+N killed by signal N (SIGINT, SIGTERM). On any error no file is left under OUT.bag.)";
 
 /// The tool's options as given; parseDiveImportArguments converts and checks them with messages naming each.
 struct DiveImportArgumentText {
-  std::string images, nav, camera, output, image_times, start_time, fps, origin_lat, origin_lon, encoding,
-      image_storage, camera_pose;
+  std::string images, nav, camera, output, image_times, start_time, fps, origin_lat, origin_lon, heading, altitude,
+      encoding, image_storage, camera_pose;
 };
 
 /// The command line of dive_import, filling `text`.
@@ -339,12 +353,17 @@ std::unique_ptr<CLI::App> diveImportCommandLine(DiveImportArgumentText* text) {
          "folder of images (.png .jpg .jpeg .tif .tiff .bmp, sorted by file name: zero-pad\n"
          "the numbers) or a video file (any format OpenCV/FFmpeg reads)")
       ->required();
-  option("--nav", &text->nav, "NAV.csv", "Inputs", "navigation CSV (conventions below)")->required();
+  option("--nav", &text->nav, "NAV.csv", "Inputs",
+         "navigation CSV (conventions below); without it, --altitude is required");
+  option("--altitude", &text->altitude, "M|FILE.csv[:COLUMN]", "Inputs",
+         "without --nav only: the altitude of base_link above the seabed, a constant in\n"
+         "metres within (0, 1000] or a CSV of times and altitudes (below)");
   option("--camera", &text->camera, "K.yaml", "Inputs",
          "intrinsics: camera_calibration_parsers YAML (image_width, image_height,\n"
          "camera_matrix, distortion_coefficients) or the short form (image_width,\n"
-         "image_height, K: [9], D: [4..5]). Every image must have this size.")
-      ->required();
+         "image_height, K: [9], D: [4..5]). Every image must have this size. Required;\n"
+         "unknown intrinsics: self_calibrate --images DIR --output K.yaml estimates them,\n"
+         "or mosaic_video does it all from a video");
   option("--output", &text->output, "OUT.bag", "Inputs",
          "bag to write; written under a temporary name and renamed when complete")
       ->required();
@@ -362,8 +381,12 @@ std::unique_ptr<CLI::App> diveImportCommandLine(DiveImportArgumentText* text) {
          "the world frame becomes \"utm\", positions UTM easting = origin easting + x,\n"
          "northing = origin northing + y; a /nav/datum gives the zone and EPSG code. Without\n"
          "an origin or lat, lon columns, the world frame is \"map\" and positions are written\n"
-         "as given.");
+         "as given. Without --nav: the camera's position at the first frame (the start\n"
+         "point of the replay), its zone on /nav/datum.");
   option("--origin-lon", &text->origin_lon, "DEG", "Geo-reference", "given with --origin-lat");
+  option("--heading", &text->heading, "DEG", "Geo-reference",
+         "without --nav only: heading of the vehicle's forward axis (base_link x) at the\n"
+         "first frame, degrees clockwise from true north, in [-360, 360]; default 0");
   option("--encoding", &text->encoding, "", "Output",
          "pixel format of the images (default bgr8; mono8 converts to gray)")
       ->check(CLI::IsMember({encodingName(ImageEncoding::kBgr8), encodingName(ImageEncoding::kMono8)}));
@@ -409,6 +432,31 @@ Eigen::Isometry3d parseCameraPose(const std::string& text) {
   return pose;
 }
 
+AltitudeOption parseAltitudeOption(const std::string& text) {
+  AltitudeOption altitude;
+  const std::string range = "(0, " + formatNumber(kMaxAltitude_m, 0) + "] m";
+  double value = 0.0;
+  if (parseDouble(text, &value)) {
+    if (!(value > 0.0 && value <= kMaxAltitude_m)) failInput("--altitude: " + trim(text) + " m is not within " + range);
+    altitude.constant_m = value;
+    return altitude;
+  }
+  std::string path = text, column;
+  const auto colon = text.find_last_of(':');
+  if (colon != std::string::npos && lower(text.substr(0, colon)).size() >= 4 &&
+      extensionOf(text.substr(0, colon)) == ".csv" && text.find('/', colon) == std::string::npos) {
+    path = text.substr(0, colon);
+    column = trim(text.substr(colon + 1));
+    if (column.empty()) failInput("--altitude: '" + text + "' names no column after ':' (FILE.csv:COLUMN)");
+  }
+  if (extensionOf(path) != ".csv")
+    failInput("--altitude: '" + text + "' is neither an altitude in metres within " + range +
+              " nor FILE.csv or FILE.csv:COLUMN");
+  altitude.csv_path = path;
+  altitude.csv_column = column;
+  return altitude;
+}
+
 DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args) {
   DiveImportArgumentText text;
   const std::unique_ptr<CLI::App> app = diveImportCommandLine(&text);
@@ -432,8 +480,36 @@ DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args)
   };
   take("--images", text.images, &o.images_path);
   take("--nav", text.nav, &o.nav_path);
-  take("--camera", text.camera, &o.camera_path);
   take("--output", text.output, &o.output_path);
+  if (!take("--camera", text.camera, &o.camera_path))
+    failInput(
+        "--camera is required: the bag's /camera/camera_info needs the camera's intrinsics. Unknown intrinsics: "
+        "estimate them from the dive's images first with `rosrun exocet_mosaic self_calibrate --images DIR --output "
+        "camera.yaml` (a folder of images; or --bag BAG --image-topic TOPIC) and give --camera camera.yaml, or run "
+        "`rosrun exocet_mosaic mosaic_video`, which calibrates, imports and mosaics a video in one go");
+  std::string altitude_text, heading_text;
+  const bool has_altitude = take("--altitude", text.altitude, &altitude_text);
+  const bool has_heading = take("--heading", text.heading, &heading_text);
+  if (!o.nav_path.empty()) {
+    if (has_altitude)
+      failInput("--altitude cannot be combined with --nav: the navigation CSV's altitude column gives /nav/altitude");
+    if (has_heading)
+      failInput(
+          "--heading cannot be combined with --nav: the navigation CSV gives the orientation (qx..qw, yaw_deg or "
+          "heading_deg columns)");
+  } else {
+    if (!has_altitude)
+      failInput("--altitude is required without --nav: the camera's scale needs the altitude above the seabed, a " +
+                std::string("constant in metres within (0, ") + formatNumber(kMaxAltitude_m, 0) +
+                "] or FILE.csv[:COLUMN]");
+    o.altitude = parseAltitudeOption(altitude_text);
+    if (has_heading) {
+      const double heading_deg = parseOptionNumber("--heading", heading_text);
+      if (heading_deg < -360.0 || heading_deg > 360.0)
+        failInput("--heading: " + heading_text + " is not within [-360, 360] degrees (clockwise from true north)");
+      o.heading_deg = heading_deg;
+    }
+  }
   take("--image-times", text.image_times, &o.image_times_path);
   std::string start_text;
   if (take("--start-time", text.start_time, &start_text))
@@ -652,6 +728,95 @@ NavigationTable readNavigationCsv(const std::string& path, const std::optional<G
     }
   return nav;
 }
+
+// ------------------------------------------------------------------------------------------------------------
+// Altitude without navigation
+
+namespace {
+
+/// Altitude record with the conventions of the navigation's (frame altimeter, written by the bag writer).
+AltitudeRecord altitudeRecord(double stamp_s, double altitude_m) {
+  AltitudeRecord a;
+  a.stamp_s = stamp_s;
+  a.range_m = altitude_m;
+  return a;
+}
+
+/// Widens the records' [min_range_m, max_range_m] to hold every value, as the navigation's altitude does.
+void coverRangeSpan(std::vector<AltitudeRecord>* records) {
+  double lo = std::numeric_limits<double>::infinity(), hi = 0.0;
+  for (const auto& a : *records) {
+    lo = std::min(lo, a.range_m);
+    hi = std::max(hi, a.range_m);
+  }
+  for (auto& a : *records) {
+    a.min_range_m = std::min(a.min_range_m, lo);
+    a.max_range_m = std::max(a.max_range_m, hi);
+  }
+}
+
+}  // namespace
+
+AltitudeTable readAltitudeCsv(const std::string& path, const std::string& column) {
+  const CsvTable table = readCsv("--altitude", path, "altitude CSV");
+  const int c_time = requireTimeColumn(table);
+  const std::vector<std::string> names =
+      column.empty() ? std::vector<std::string>{"altitude", "altitude_m"} : std::vector<std::string>{lower(column)};
+  const int c_altitude = table.column(names);
+  if (c_altitude < 0)
+    failInput("--altitude: " + path + ": no altitude column; expected " + join(names, " or ") +
+              (column.empty() ? " (or name it: --altitude FILE.csv:COLUMN)" : "") +
+              " (the header has: " + join(table.raw_names, ", ") + ")");
+  AltitudeTable out;
+  out.path = path;
+  out.time_column = table.raw_names[c_time];
+  out.altitude_column = table.raw_names[c_altitude];
+  const std::string range = "(0, " + formatNumber(kMaxAltitude_m, 0) + "] m";
+  int previous_line = 0;
+  for (const CsvRow& row : table.rows) {
+    const double t = table.time(row, c_time);
+    bool empty = false;
+    const double altitude_m = table.number(row, c_altitude, &empty);
+    if (empty) continue;  // no measurement on that row
+    if (!(altitude_m > 0.0 && altitude_m <= kMaxAltitude_m))
+      failInput(table.where(row, c_altitude) + ": altitude " + trim(row.fields[c_altitude]) + " m is not within " +
+                range);
+    if (!out.rows.empty() && !(t > out.rows.back().stamp_s))
+      failInput(table.where(row, c_time) + ": time " + formatNumber(t) + " s is not after " +
+                formatNumber(out.rows.back().stamp_s) + " s on line " + std::to_string(previous_line) +
+                "; times must increase");
+    out.rows.push_back(altitudeRecord(t, altitude_m));
+    previous_line = row.line;
+  }
+  if (out.rows.empty()) failInput("--altitude: " + path + ": no row has an altitude");
+  coverRangeSpan(&out.rows);
+  return out;
+}
+
+double AltitudeTable::at(double stamp_s) const {
+  if (stamp_s <= rows.front().stamp_s) return rows.front().range_m;
+  if (stamp_s >= rows.back().stamp_s) return rows.back().range_m;
+  const auto after = std::lower_bound(rows.begin(), rows.end(), stamp_s,
+                                      [](const AltitudeRecord& a, double t) { return a.stamp_s < t; });
+  const auto before = after - 1;
+  const double w = (stamp_s - before->stamp_s) / (after->stamp_s - before->stamp_s);
+  return (1.0 - w) * before->range_m + w * after->range_m;
+}
+
+namespace {
+
+/// Throws naming --altitude when a frame at `stamp_s` is outside the table's span by more than the margin.
+void requireAltitudeCovers(const AltitudeTable& table, double stamp_s, const std::string& frame_name) {
+  const double first_s = table.rows.front().stamp_s, last_s = table.rows.back().stamp_s;
+  if (stamp_s >= first_s - kAltitudeCsvMargin_s && stamp_s <= last_s + kAltitudeCsvMargin_s) return;
+  const double off_s = stamp_s < first_s ? first_s - stamp_s : stamp_s - last_s;
+  failInput("--altitude: " + frame_name + " at " + formatNumber(stamp_s) + " s is " + formatNumber(off_s, 3) + " s " +
+            (stamp_s < first_s ? "before the first" : "after the last") + " row of '" + table.path + "' (rows from " +
+            formatNumber(first_s) + " to " + formatNumber(last_s) + " s); the images must lie " +
+            "within the altitude's time span give or take " + formatNumber(kAltitudeCsvMargin_s, 1) + " s");
+}
+
+}  // namespace
 
 // ------------------------------------------------------------------------------------------------------------
 // Images and their times
@@ -878,7 +1043,40 @@ DiveImport prepareDiveImport(const DiveImportOptions& options) {
   } else {
     dive.times = frameTimesFromRate(dive.images, options.start_time_s.value_or(0.0), options.fps.value_or(0.0));
   }
-  dive.navigation = readNavigationCsv(options.nav_path, options.origin);
+  if (dive.hasNavigation()) {
+    dive.navigation = readNavigationCsv(options.nav_path, options.origin);
+  } else {
+    if (!options.altitude) failInput("--altitude is required without --nav");
+    if (options.origin) {
+      dive.navigation.world_frame = "utm";
+      try {
+        dive.navigation.datum =
+            exocet_common::makeGeoReference(options.origin->latitude_deg, options.origin->longitude_deg);
+      } catch (const std::invalid_argument& e) {
+        failInput(std::string("--origin-lat/--origin-lon: ") + e.what());
+      }
+    }
+    // The fusion's start heading is from grid north: turned by the meridian convergence at the start point.
+    double heading_deg = options.heading_deg.value_or(0.0);
+    if (dive.navigation.datum) {
+      const GeoOrigin& start = *options.origin;
+      heading_deg +=
+          gridBearingOfTrueNorth_rad(*dive.navigation.datum, start.latitude_deg, start.longitude_deg) / kDegToRad;
+    }
+    dive.initial_grid_heading_deg = heading_deg;
+    if (!options.heading_deg)
+      dive.warnings.push_back("no --heading: the replay takes the vehicle as heading north at the first frame");
+    if (!options.altitude->csv_path.empty()) {
+      dive.altitude_table = readAltitudeCsv(options.altitude->csv_path, options.altitude->csv_column);
+      // The frames whose times are known now (a folder, an indexed video); the others are checked as they come.
+      for (size_t k = 0; k < dive.times.stamps_s.size(); ++k)
+        if (!std::isnan(dive.times.stamps_s[k]))
+          requireAltitudeCovers(*dive.altitude_table, dive.times.stamps_s[k],
+                                dive.images.kind == ImageSource::Kind::kFolder
+                                    ? "image '" + baseName(dive.images.files[k]) + "'"
+                                    : "video frame " + std::to_string(k));
+    }
+  }
   if (pathType(options.output_path) == PathType::kFolder)
     failInput("--output: '" + options.output_path + "' is a folder; give the bag's file name");
   const std::string problem = exocet_common::checkWritableDestination(options.output_path);
@@ -888,14 +1086,57 @@ DiveImport prepareDiveImport(const DiveImportOptions& options) {
   camera_mount.child_frame = frames::kCameraOptical;
   camera_mount.parent_from_child = options.base_from_camera;
   dive.static_transforms.push_back(camera_mount);
+  bool altitude = !dive.hasNavigation();
+  for (const auto& row : dive.navigation.rows) altitude = altitude || row.altitude.has_value();
+  if (altitude) {
+    // The fusion places the altimeter by tf: the altitude is base_link's (the CSV's convention), so at its origin.
+    StaticTransform altimeter_mount;
+    altimeter_mount.parent_frame = frames::kBaseLink;
+    altimeter_mount.child_frame = frames::kAltimeter;
+    dive.static_transforms.push_back(altimeter_mount);
+  }
   return dive;
+}
+
+std::vector<ReplayArgument> replayArguments(const DiveImport& dive) {
+  std::vector<ReplayArgument> arguments = {{"ground_truth", "false"}};
+  if (dive.hasNavigation()) return arguments;
+  arguments.push_back({"fusion_preset", "images_only"});
+  if (dive.options.origin) {
+    arguments.push_back({"origin_lat", formatNumber(dive.options.origin->latitude_deg, 8)});
+    arguments.push_back({"origin_lon", formatNumber(dive.options.origin->longitude_deg, 8)});
+  }
+  arguments.push_back({"heading_deg", formatNumber(dive.initial_grid_heading_deg.value_or(0.0), 4)});
+  return arguments;
+}
+
+std::string replaySidecarPath(const std::string& bag_path) { return bag_path + ".replay.json"; }
+
+std::string replayCommand(const std::string& bag_path, const std::string& output_dir,
+                          const std::vector<ReplayArgument>& arguments) {
+  const auto quoted = [](const std::string& word) {
+    const bool plain = !word.empty() && std::all_of(word.begin(), word.end(), [](unsigned char c) {
+      return std::isalnum(c) || std::strchr("_-+=:,./@%", c) != nullptr;
+    });
+    if (plain) return word;
+    std::string out = "'";
+    for (char c : word) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+  };
+  std::string command = "rosrun exocet_mosaic replay_dive " + quoted(bag_path) + " " + quoted(output_dir);
+  for (const auto& a : arguments) command += " " + quoted(a.name + ":=" + a.value);
+  return command;
 }
 
 std::string DiveImportSummary::line(const std::string& output_path) const {
   std::ostringstream out;
-  out << "dive_import: " << frames << " frames, " << nav_rows << " nav rows (" << depth_records << " depth, "
-      << altitude_records << " altitude), " << std::fixed << std::setprecision(3) << duration_s() << " s from "
-      << first_stamp_s << " (Unix s), world frame " << world_frame << " -> " << output_path;
+  out << "dive_import: " << frames << " frames, ";
+  if (navigation)
+    out << nav_rows << " nav rows (" << depth_records << " depth, " << altitude_records << " altitude), ";
+  else
+    out << "no navigation (" << altitude_records << " altitude), ";
+  out << std::fixed << std::setprecision(3) << duration_s() << " s from " << first_stamp_s << " (Unix s), world frame "
+      << world_frame << " -> " << output_path;
   return out.str();
 }
 
@@ -911,22 +1152,54 @@ std::vector<std::string> DiveImportSummary::warnings() const {
 DiveImportSummary writeDiveImport(const DiveImport& dive, DiveRecordSink* sink) {
   DiveImportSummary summary;
   summary.world_frame = dive.navigation.world_frame;
+  summary.navigation = dive.hasNavigation();
   const auto& rows = dive.navigation.rows;
   FrameReader reader(dive.images, dive.times, dive.camera, dive.options.encoding);
   CameraFrame frame;
   bool have_frame = reader.next(&frame);
   if (!have_frame) failInput("--images: '" + dive.images.path + "' gave no frames");
 
+  // Without navigation: the altitude CSV's rows near the images (a long log must not delay the replay's start),
+  // and an altitude at each image, so that every image has one however sparse the rows.
+  const AltitudeTable* table = dive.altitude_table ? &*dive.altitude_table : nullptr;
+  std::vector<AltitudeRecord> altitude_rows;
+  if (table)
+    for (const auto& a : table->rows)
+      if (a.stamp_s >= frame.stamp_s - kAltitudeCsvMargin_s) altitude_rows.push_back(a);
+  const auto frameAltitude = [&](double stamp_s) {
+    AltitudeRecord a = table ? altitudeRecord(stamp_s, table->at(stamp_s))
+                             : altitudeRecord(stamp_s, *dive.options.altitude->constant_m);
+    if (table) {
+      a.min_range_m = table->rows.front().min_range_m;
+      a.max_range_m = table->rows.front().max_range_m;
+    } else {
+      std::vector<AltitudeRecord> one = {a};
+      coverRangeSpan(&one);
+      a = one.front();
+    }
+    return a;
+  };
+  const auto frameName = [&](const CameraFrame& f) {
+    return dive.images.kind == ImageSource::Kind::kFolder ? "image '" + baseName(dive.images.files[f.index]) + "'"
+                                                          : "video frame " + std::to_string(f.index);
+  };
+
   // Latched messages first, stamped at the start of the dive so that they precede everything on playback.
-  const double start_s = std::min(frame.stamp_s, rows.front().pose.stamp_s);
+  double start_s = frame.stamp_s;
+  if (!rows.empty()) start_s = std::min(start_s, rows.front().pose.stamp_s);
+  if (!altitude_rows.empty()) start_s = std::min(start_s, altitude_rows.front().stamp_s);
   if (dive.navigation.datum) sink->writeDatum(*dive.navigation.datum, start_s);
   sink->writeStaticTransforms(dive.static_transforms, start_s);
   summary.first_stamp_s = summary.last_stamp_s = start_s;
 
-  // Frames and navigation merged in time order (navigation first on ties), so that the bag plays back in order.
-  const double nav_first_s = rows.front().pose.stamp_s, nav_last_s = rows.back().pose.stamp_s;
-  size_t r = 0;
-  while (have_frame || r < rows.size()) {
+  // Frames and navigation (or altitude rows) merged in time order (navigation first on ties), so that the bag plays
+  // back in order.
+  const double nav_first_s = rows.empty() ? 0.0 : rows.front().pose.stamp_s;
+  const double nav_last_s = rows.empty() ? 0.0 : rows.back().pose.stamp_s;
+  double last_frame_s = frame.stamp_s;
+  double last_altitude_s = -std::numeric_limits<double>::infinity();
+  size_t r = 0, a = 0;
+  while (have_frame || r < rows.size() || a < altitude_rows.size()) {
     if (r < rows.size() && (!have_frame || rows[r].pose.stamp_s <= frame.stamp_s)) {
       const NavigationRow& row = rows[r++];
       sink->writeNavOdometry(row.pose);
@@ -940,12 +1213,31 @@ DiveImportSummary writeDiveImport(const DiveImport& dive, DiveRecordSink* sink) 
       }
       ++summary.nav_rows;
       summary.last_stamp_s = std::max(summary.last_stamp_s, row.pose.stamp_s);
+    } else if (a < altitude_rows.size() && (!have_frame || altitude_rows[a].stamp_s <= frame.stamp_s)) {
+      const AltitudeRecord& row = altitude_rows[a++];
+      if (!have_frame && row.stamp_s > last_frame_s + kAltitudeCsvMargin_s) {
+        a = altitude_rows.size();  // the rest of the log is beyond the images
+        continue;
+      }
+      sink->writeAltitude(row);
+      ++summary.altitude_records;
+      last_altitude_s = row.stamp_s;
+      summary.last_stamp_s = std::max(summary.last_stamp_s, row.stamp_s);
     } else {
+      if (!summary.navigation) {
+        if (table) requireAltitudeCovers(*table, frame.stamp_s, frameName(frame));
+        if (frame.stamp_s != last_altitude_s) {  // a row at the image's stamp already gives its altitude
+          sink->writeAltitude(frameAltitude(frame.stamp_s));
+          ++summary.altitude_records;
+          last_altitude_s = frame.stamp_s;
+        }
+      }
       sink->writeCameraFrame(frame, dive.camera);
       ++summary.frames;
-      if (frame.stamp_s < nav_first_s) ++summary.frames_before_nav;
-      if (frame.stamp_s > nav_last_s) ++summary.frames_after_nav;
+      if (summary.navigation && frame.stamp_s < nav_first_s) ++summary.frames_before_nav;
+      if (summary.navigation && frame.stamp_s > nav_last_s) ++summary.frames_after_nav;
       summary.last_stamp_s = std::max(summary.last_stamp_s, frame.stamp_s);
+      last_frame_s = frame.stamp_s;
       have_frame = reader.next(&frame);
     }
   }

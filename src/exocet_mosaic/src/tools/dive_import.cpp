@@ -1,4 +1,5 @@
-// dive_import: images + navigation CSV + camera intrinsics -> a dive bag with the simulator's layout.
+// dive_import: images + navigation CSV (or an altitude) + camera intrinsics -> a dive bag with the simulator's layout,
+// and beside it the replay's arguments (OUT.bag.replay.json).
 // Usage and conventions: dive_import --help (text in dive/dive_import.cpp), README.md (section "Importing a real dive:
 // dive_import").
 
@@ -7,8 +8,11 @@
 #include <string>
 #include <vector>
 
-#include "exocet_mosaic/ros/dive_bag_writer.h"
+#include <nlohmann/json.hpp>
+
+#include "exocet_common/json_file.h"
 #include "exocet_mosaic/dive/dive_import.h"
+#include "exocet_mosaic/ros/dive_bag_writer.h"
 
 namespace {
 
@@ -56,6 +60,26 @@ class InterruptibleBagSink final : public exocet_mosaic::dive::DiveRecordSink {
   exocet_mosaic::dive::DiveRecordSinkFor<exocet_mosaic::DiveBagWriter> sink_;
 };
 
+/// The replay's arguments beside the bag (replay_dive reads them), written whole or not at all.
+void writeReplaySidecar(const std::string& bag_path, const std::vector<exocet_mosaic::dive::ReplayArgument>& args) {
+  nlohmann::ordered_json arguments = nlohmann::ordered_json::object();
+  for (const auto& a : args) arguments[a.name] = a.value;
+  nlohmann::ordered_json sidecar;
+  sidecar["description"] =
+      "replay.launch arguments for this bag, written by dive_import; replay_dive BAG OUTDIR uses them, "
+      "ARG:=VALUE on its command line overrides them";
+  sidecar["replay_arguments"] = arguments;
+  exocet_common::writeJsonFileAtomically(exocet_mosaic::dive::replaySidecarPath(bag_path), sidecar);
+}
+
+/// A folder for the tiles beside the bag: "dive.bag" -> "dive_tiles".
+std::string tilesFolderFor(const std::string& bag_path) {
+  const auto slash = bag_path.find_last_of('/');
+  const auto dot = bag_path.find_last_of('.');
+  const bool has_extension = dot != std::string::npos && (slash == std::string::npos || dot > slash + 1);
+  return (has_extension ? bag_path.substr(0, dot) : bag_path) + "_tiles";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -79,8 +103,20 @@ int main(int argc, char** argv) {
     InterruptibleBagSink sink(&writer);
     const dive::DiveImportSummary summary = dive::writeDiveImport(dive, &sink);
     writer.commit();
+    const std::vector<dive::ReplayArgument> replay = dive::replayArguments(dive);
+    writeReplaySidecar(options.output_path, replay);
     for (const auto& warning : summary.warnings()) std::cerr << "dive_import: warning: " << warning << "\n";
-    std::cout << summary.line(options.output_path) << std::endl;
+    std::cout << summary.line(options.output_path) << "\n";
+    std::cout << "dive_import: replay it with (arguments also in " << dive::replaySidecarPath(options.output_path)
+              << ", which replay_dive reads):\n  "
+              << dive::replayCommand(options.output_path, tilesFolderFor(options.output_path), replay) << "\n";
+    if (dive.hasNavigation() && summary.altitude_records == 0)
+      std::cout << "dive_import: the navigation has no altitude: add camera_height_m:=M (the camera's height above "
+                   "the seabed) or seabed_depth_m:=M (with /nav/depth) to the replay\n";
+    if (!dive.hasNavigation() && !options.origin)
+      std::cout << "dive_import: no start point (--origin-lat/--origin-lon): the tiles will be in the local frame "
+                   "'map' (metres), not geo-referenced\n";
+    std::cout << std::flush;
     return 0;
   } catch (const dive::DiveImportError& e) {
     std::cerr << "dive_import: error: " << e.what() << "\n";

@@ -24,6 +24,12 @@
  * World frame: "utm" when lat, lon columns or an origin are given (positions become UTM easting, northing, up; x, y
  * are offsets from the origin; a heading is turned from true to grid north by the meridian convergence), otherwise
  * "map" (local coordinates as given).
+ *
+ * Without a navigation CSV (no --nav) the bag holds the images, camera_info, /tf_static and /nav/altitude only (no
+ * /nav/odometry): the altitude is a constant (--altitude M, one record at each image) or read from a small CSV
+ * (--altitude FILE.csv[:COLUMN], one record at each row within kAltitudeCsvMargin_s of the images and one at each
+ * image, interpolated). The start point (--origin-lat/--origin-lon, --heading) is not in the bag: it goes to the
+ * fusion's images-only mode through replayArguments(), which the tool prints and writes beside the bag.
  */
 #pragma once
 
@@ -68,16 +74,35 @@ struct GeoOrigin {
   double longitude_deg = 0.0;
 };
 
+/// Largest altitude (m) accepted by --altitude, as a constant or in its CSV: altitudes are in (0, kMaxAltitude_m].
+constexpr double kMaxAltitude_m = 1000.0;
+/// How far (s) the images may lie outside the time span of an --altitude CSV: within it, an image takes the nearest
+/// row's altitude; beyond it, the import fails.
+constexpr double kAltitudeCsvMargin_s = 1.0;
+
+/// The altitude of a dive imported without navigation (--altitude): a constant or a CSV column.
+struct AltitudeOption {
+  std::optional<double> constant_m;  ///< --altitude M: altitude of base_link above the seabed (m), in (0, 1000]
+  std::string csv_path;              ///< --altitude FILE.csv[:COLUMN]: CSV with a time and an altitude column
+  std::string csv_column;            ///< the column given after ':'; empty: "altitude" (or "altitude_m")
+};
+
 /// Everything the tool's command line says (see diveImportUsage()).
 struct DiveImportOptions {
   std::string images_path;       ///< folder of images or video file
-  std::string nav_path;          ///< navigation CSV
+  std::string nav_path;          ///< navigation CSV; empty: a dive without navigation (then `altitude` is set)
   std::string camera_path;       ///< camera intrinsics YAML
   std::string output_path;       ///< bag to write
   std::string image_times_path;  ///< index CSV of frame times; empty: use start_time_s and fps
   std::optional<double> start_time_s;  ///< time of the first frame (Unix seconds)
   std::optional<double> fps;           ///< frame rate (Hz); for a video, defaults to the container's
-  std::optional<GeoOrigin> origin;     ///< origin of x, y: makes the world frame "utm"
+  /// With --nav: origin of x, y, makes the world frame "utm". Without: the start point of the dive (the camera at
+  /// the first frame), given to the fusion; the bag then carries its UTM zone on /nav/datum.
+  std::optional<GeoOrigin> origin;
+  std::optional<AltitudeOption> altitude;  ///< --altitude: only without --nav, and then required
+  /// --heading: without --nav, heading of base_link's forward axis at the first frame (degrees clockwise from true
+  /// north, in [-360, 360]).
+  std::optional<double> heading_deg;
   ImageEncoding encoding = ImageEncoding::kBgr8;
   std::string image_storage = "raw";  ///< raw, jpeg or png (checked here, parsed by the bag writer)
   /// base_link -> camera_optical: pose of the camera in base_link. Identity unless --camera-pose is given.
@@ -91,13 +116,40 @@ std::string diveImportUsage();
 /**
  * @brief Parses the tool's arguments (without the program name) with CLI11. Accepts "--name value" and
  * "--name=value". Throws DiveImportError (kInput) naming the argument and its allowed values for an unknown option, a
- * missing or malformed value, a missing required option or conflicting options.
+ * missing or malformed value, a missing required option or conflicting options (--altitude or --heading with
+ * --nav). A missing --camera is an error that says how to get the intrinsics (self_calibrate, mosaic_video).
  */
 DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args);
 
 /// Parses "x,y,z,roll,pitch,yaw" (metres, degrees; R = Rz(yaw) Ry(pitch) Rx(roll)) into the pose of the camera's
 /// optical frame in base_link. Throws DiveImportError (kInput) naming --camera-pose.
 Eigen::Isometry3d parseCameraPose(const std::string& text);
+
+/**
+ * @brief Parses --altitude's value: a number of metres in (0, kMaxAltitude_m], or "FILE.csv" or "FILE.csv:COLUMN"
+ * (the file is not read here). Throws DiveImportError (kInput) naming --altitude, its range and its two forms.
+ */
+AltitudeOption parseAltitudeOption(const std::string& text);
+
+/// The altitude CSV of --altitude FILE.csv[:COLUMN].
+struct AltitudeTable {
+  std::string path;
+  std::string time_column;      ///< as in the header
+  std::string altitude_column;  ///< as in the header
+  /// One record per row with a value (empty cells skipped), times increasing; frame and range span as the
+  /// navigation's altitude records (min_range_m, max_range_m cover every value).
+  std::vector<AltitudeRecord> rows;
+
+  /// Altitude at `stamp_s`: linear between the rows around it, the first or last row's value outside their span.
+  double at(double stamp_s) const;
+};
+
+/**
+ * @brief Reads an altitude CSV: a header with a time column (t_unix_s, t, time, stamp, ts: Unix seconds, increasing)
+ * and the altitude column `column` (empty: altitude, else altitude_m; metres, in (0, kMaxAltitude_m]); other columns
+ * ignored, empty altitude cells skipped. Throws DiveImportError (kInput) naming --altitude, the file, line and column.
+ */
+AltitudeTable readAltitudeCsv(const std::string& path, const std::string& column);
 
 /// One row of the navigation CSV.
 struct NavigationRow {
@@ -197,13 +249,47 @@ struct DiveImport {
   exocet_common::CameraModel camera;
   ImageSource images;
   FrameTimes times;
+  /// With --nav: the CSV's. Without: no rows; world frame "utm" and the datum of the start point when one is given,
+  /// else "map".
   NavigationTable navigation;
-  std::vector<StaticTransform> static_transforms;  ///< base_link -> camera_optical
+  std::optional<AltitudeTable> altitude_table;  ///< --altitude FILE.csv[:COLUMN]
+  /// Without --nav: the start heading for the fusion's ~initial_heading_deg, clockwise from grid north (--heading
+  /// turned by the meridian convergence at the start point; as given without a start point).
+  std::optional<double> initial_grid_heading_deg;
+  /// base_link -> camera_optical, and base_link -> altimeter (identity: the altitude is base_link's) when the bag
+  /// has /nav/altitude.
+  std::vector<StaticTransform> static_transforms;
   std::vector<std::string> warnings;  ///< worth telling the user, not errors
+
+  bool hasNavigation() const { return !options.nav_path.empty(); }
 };
 
-/// Reads and validates the camera, image list, frame times, navigation and output folder of `options`.
+/// Reads and validates the camera, image list, frame times, navigation (or altitude CSV) and output folder of
+/// `options`. Without --nav, checks that the images' known times lie within the altitude CSV's span (with
+/// kAltitudeCsvMargin_s).
 DiveImport prepareDiveImport(const DiveImportOptions& options);
+
+/// One argument of replay.launch (and replay_dive): name and value, as in "name:=value".
+struct ReplayArgument {
+  std::string name;
+  std::string value;
+};
+
+/**
+ * @brief The replay.launch arguments that replay the imported bag as it should be: ground_truth false (a real dive);
+ * without navigation fusion_preset images_only, and with a start point origin_lat, origin_lon (the fusion's
+ * ~initial_latitude_deg, ~initial_longitude_deg), heading_deg (~initial_heading_deg, grid north; 0 when --heading
+ * is not given). Without a start point the replay maps the dive in the local frame "map".
+ */
+std::vector<ReplayArgument> replayArguments(const DiveImport& dive);
+
+/// The file beside the bag that replay_dive reads for these arguments: `bag_path` + ".replay.json".
+std::string replaySidecarPath(const std::string& bag_path);
+
+/// The shell command that replays `bag_path` into `output_dir` with `arguments`:
+/// "rosrun exocet_mosaic replay_dive BAG OUTPUT_DIR name:=value ...", words quoted for a POSIX shell when needed.
+std::string replayCommand(const std::string& bag_path, const std::string& output_dir,
+                          const std::vector<ReplayArgument>& arguments);
 
 /// Where writeDiveImport puts the records; DiveRecordSinkFor adapts any writer with these methods
 /// (e.g. exocet_mosaic::DiveBagWriter).
@@ -247,6 +333,7 @@ struct DiveImportSummary {
   double first_stamp_s = 0.0;
   double last_stamp_s = 0.0;
   std::string world_frame;
+  bool navigation = true;  ///< false: imported without --nav
   int frames_before_nav = 0;  ///< frames stamped before the first navigation row
   int frames_after_nav = 0;   ///< frames stamped after the last navigation row
 
@@ -258,8 +345,10 @@ struct DiveImportSummary {
 };
 
 /**
- * @brief Writes the datum (if geo-referenced) and static transforms, then the frames and navigation rows merged in
- * time order. Throws DiveImportError for bad frames; the sink's own exceptions pass through.
+ * @brief Writes the datum (if geo-referenced) and static transforms, then the frames and navigation rows (without
+ * navigation: the altitude records) merged in time order. Throws DiveImportError for bad frames and, without
+ * navigation, for a frame outside the altitude CSV's span by more than kAltitudeCsvMargin_s; the sink's own
+ * exceptions pass through.
  */
 DiveImportSummary writeDiveImport(const DiveImport& dive, DiveRecordSink* sink);
 
