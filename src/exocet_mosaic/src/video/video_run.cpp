@@ -1,5 +1,6 @@
 #include "exocet_mosaic/video/video_run.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -73,11 +74,39 @@ struct OpenedVideo {
   int container_frames = 0;
 };
 
+/// Keeps the decoders' own messages (FFmpeg's, GStreamer's) off stderr while it lives: a file that is no video is
+/// reported in one line of ours.
+class QuietStderr {
+ public:
+  QuietStderr() : saved_(::dup(STDERR_FILENO)) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    if (saved_ >= 0 && null >= 0) ::dup2(null, STDERR_FILENO);
+    if (null >= 0) ::close(null);
+  }
+  ~QuietStderr() {
+    if (saved_ >= 0) {
+      ::dup2(saved_, STDERR_FILENO);
+      ::close(saved_);
+    }
+  }
+  QuietStderr(const QuietStderr&) = delete;
+  QuietStderr& operator=(const QuietStderr&) = delete;
+
+ private:
+  int saved_;
+};
+
 OpenedVideo openVideo(const VideoRunOptions& o) {
   if (!fs::exists(o.video_path)) throw BadInput("VIDEO '" + o.video_path + "' does not exist");
   if (!fs::is_regular_file(o.video_path)) throw BadInput("VIDEO '" + o.video_path + "' is not a file");
   OpenedVideo v;
-  if (!v.capture.open(o.video_path) || !v.capture.isOpened())
+  bool opened = false;
+  {
+    const QuietStderr quiet;
+    opened = v.capture.open(o.video_path, cv::CAP_FFMPEG) && v.capture.isOpened();
+    if (!opened) opened = v.capture.open(o.video_path) && v.capture.isOpened();
+  }
+  if (!opened)
     throw BadInput("VIDEO '" + o.video_path + "' cannot be read as a video (no decoder opens it)");
   v.container_fps = v.capture.get(cv::CAP_PROP_FPS);
   v.container_frames = static_cast<int>(v.capture.get(cv::CAP_PROP_FRAME_COUNT));
