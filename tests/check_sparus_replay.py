@@ -7,13 +7,17 @@ with `replay_dive`, exactly as a user would:
 - in its local frame with camera_height_m: tiles in the local frame (an engineering CRS named after it, metres), over
   the fused track, with that height in their metadata;
 - with a start point (--origin-lat/--origin-lon) and the seabed's depth: tiles in the UTM zone of the start point,
-  around it, with the camera height taken from the depth sensor.
+  around it, with the camera height taken from the depth sensor;
+- without its navigation (no --nav; --altitude 3): with a start point and heading, replayed with the command
+  dive_import prints, tiles in the start point's UTM zone around it; without a start point, replayed with
+  `replay_dive BAG OUTDIR` alone (the arguments beside the bag), tiles in the local frame 'map'.
 Each replay runs its own roslaunch on its own master port, as on a user's machine.
 """
 import csv
 import glob
 import json
 import os
+import shlex
 import shutil
 import socket
 import subprocess
@@ -56,20 +60,39 @@ class SparusReplayTest(unittest.TestCase):
     def tearDownClass(cls):
         shutil.rmtree(cls.work, ignore_errors=True)
 
-    def import_dive(self, name, extra):
+    def import_dive(self, name, extra, nav=True):
+        bag, out = self.import_dive_output(name, extra, nav)
+        return bag
+
+    def import_dive_output(self, name, extra, nav=True):
         bag = os.path.join(self.work, name + '.bag')
         d = self.data
         status, out = run(['rosrun', 'exocet_mosaic', 'dive_import', '--images', d + '/frames',
-                           '--image-times', d + '/frames_index.csv', '--nav', d + '/sparus_snippet.csv',
-                           '--camera', d + '/camera_intrinsics.yaml', '--camera-pose', '0,0,0,180,0,-90',
+                           '--image-times', d + '/frames_index.csv'] +
+                          (['--nav', d + '/sparus_snippet.csv'] if nav else []) +
+                          ['--camera', d + '/camera_intrinsics.yaml', '--camera-pose', '0,0,0,180,0,-90',
                            '--output', bag] + extra)
         self.assertEqual(status, 0, out)
-        return bag
+        return bag, out
 
     def replay(self, bag, output, extra):
-        status, out = run(['rosrun', 'exocet_mosaic', 'replay_dive', bag, output, 'ground_truth:=false'] + extra)
+        return self.run_replay(['rosrun', 'exocet_mosaic', 'replay_dive', bag, output, 'ground_truth:=false'] + extra)
+
+    def run_replay(self, command):
+        status, out = run(command)
         last = [line for line in out.splitlines() if line.startswith('replay_dive:')]
         return status, (last[-1] if last else ''), out
+
+    def check_near_start_point(self, ds, srs):
+        """The tile lies within a few metres of the start point (the dive covers about 2 m)."""
+        wgs84 = osr.SpatialReference()
+        wgs84.ImportFromEPSG(4326)
+        wgs84.SetAxisMappingStrategy(osr.OAMS_TRADITIONAL_GIS_ORDER)
+        srs.SetAxisMappingStrategy(osr.OAMS_TRADITIONAL_GIS_ORDER)
+        e, n, _ = osr.CoordinateTransformation(wgs84, srs).TransformPoint(ORIGIN_LON, ORIGIN_LAT)
+        e0, gsd, _, n0, _, _ = ds.GetGeoTransform()
+        centre_e, centre_n = e0 + gsd * ds.RasterXSize / 2, n0 - gsd * ds.RasterYSize / 2
+        self.assertLess(abs(centre_e - e) + abs(centre_n - n), 10.0, (centre_e, centre_n, e, n))
 
     def tiles_in(self, folder):
         paths = sorted(glob.glob(os.path.join(folder, 'tile_*.tif')))
@@ -129,20 +152,59 @@ class SparusReplayTest(unittest.TestCase):
         ds = gdal.Open(paths[0])
         srs = osr.SpatialReference(wkt=ds.GetProjection())
         self.assertEqual(srs.GetAuthorityCode(None), '32631')
-        # The tile lies within a few metres of the start point (the dive covers about 2 m).
-        wgs84 = osr.SpatialReference()
-        wgs84.ImportFromEPSG(4326)
-        wgs84.SetAxisMappingStrategy(osr.OAMS_TRADITIONAL_GIS_ORDER)
-        srs.SetAxisMappingStrategy(osr.OAMS_TRADITIONAL_GIS_ORDER)
-        e, n, _ = osr.CoordinateTransformation(wgs84, srs).TransformPoint(ORIGIN_LON, ORIGIN_LAT)
-        e0, gsd, _, n0, _, _ = ds.GetGeoTransform()
-        centre_e, centre_n = e0 + gsd * ds.RasterXSize / 2, n0 - gsd * ds.RasterYSize / 2
-        self.assertLess(abs(centre_e - e) + abs(centre_n - n), 10.0, (centre_e, centre_n, e, n))
+        self.check_near_start_point(ds, srs)
         # Height from the depth sensor: the seabed's depth minus the camera's (13.6-14.0 m in the CSV).
         altitude = float(ds.GetMetadataItem('EXOCET_MEAN_ALTITUDE_M'))
         self.assertGreater(altitude, 2.5)
         self.assertLess(altitude, 3.5)
         self.check_track_covered(paths[0], output)
+
+    def test_without_navigation_start_point_gives_utm_tiles(self):
+        bag, out = self.import_dive_output('sparus_nonav_geo', [
+            '--altitude', '3', '--origin-lat', str(ORIGIN_LAT), '--origin-lon', str(ORIGIN_LON), '--heading', '0'],
+            nav=False)
+        self.assertIn('no navigation (22 altitude)', out)
+        # The command the importer prints, run as printed.
+        commands = [line.strip() for line in out.splitlines()
+                    if line.strip().startswith('rosrun exocet_mosaic replay_dive ')]
+        self.assertEqual(len(commands), 1, out)
+        command = shlex.split(commands[0])
+        self.assertIn('fusion_preset:=images_only', command)
+        self.assertIn('origin_lat:=39.55000000', command)
+        output = command[4]
+        status, line, log = self.run_replay(command)
+        self.assertEqual(status, 0, log[-3000:])
+        self.assertIn('EPSG:32631', line)
+        paths = self.tiles_in(output)
+        ds = gdal.Open(paths[0])
+        srs = osr.SpatialReference(wkt=ds.GetProjection())
+        self.assertEqual(srs.GetAuthorityCode(None), '32631')
+        self.check_near_start_point(ds, srs)
+        # The camera height is the constant altitude (the camera at base_link's origin).
+        self.assertAlmostEqual(float(ds.GetMetadataItem('EXOCET_MEAN_ALTITUDE_M')), 3.0, places=3)
+        self.check_track_covered(paths[0], output)
+        self.assertEqual(json.load(open(os.path.join(output, 'run_summary.json')))['frame'], 'utm')
+
+    def test_without_navigation_or_start_point_gives_local_tiles(self):
+        bag = self.import_dive('sparus_nonav_local', ['--altitude', '3'], nav=False)
+        self.assertTrue(os.path.exists(bag + '.replay.json'))
+        output = os.path.join(self.work, 'nonav_local')
+        status, line, out = self.run_replay(['rosrun', 'exocet_mosaic', 'replay_dive', bag, output])
+        self.assertEqual(status, 0, out[-3000:])
+        self.assertIn("local frame 'map'", line)
+        self.assertIn("the tiles are in that local frame", out, 'the fusion says the tiles are not geo-referenced')
+        paths = self.tiles_in(output)
+        for path in paths:
+            ds = gdal.Open(path)
+            srs = osr.SpatialReference(wkt=ds.GetProjection())
+            self.assertTrue(srs.IsLocal(), ds.GetProjection())
+            self.assertIn("'map'", srs.GetName())
+            self.assertEqual(srs.GetLinearUnits(), 1.0)
+            self.assertAlmostEqual(float(ds.GetMetadataItem('EXOCET_MEAN_ALTITUDE_M')), 3.0, places=3)
+        self.check_track_covered(paths[0], output)
+        # The track starts at the local frame's origin.
+        first = next(csv.DictReader(open(os.path.join(output, 'fused_track.csv'))))
+        self.assertLess(abs(float(first['easting_m'])) + abs(float(first['northing_m'])), 0.5, first)
 
 
 if __name__ == '__main__':

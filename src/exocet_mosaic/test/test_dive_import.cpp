@@ -570,7 +570,8 @@ TEST(DiveImportNoNav, MissingCameraSaysHowToGetIt) {
   std::vector<std::string> args = noNavArgs(dir, "2.5");
   args.erase(args.begin() + 6, args.begin() + 8);  // --camera
   const std::vector<std::string> parts = {"--camera is required", "rosrun exocet_mosaic self_calibrate --images DIR",
-                                          "--output camera.yaml", "--bag BAG", "mosaic_video"};
+                                          "--output camera.yaml", "--bag BAG",
+                                          "rosrun exocet_mosaic mosaic_video VIDEO --altitude M --output DIR"};
   expectImportError([&] { dive::parseDiveImportArguments(args); }, dive::DiveImportError::Kind::kInput, parts);
   const RunResult run = runTool(args, dir);
   EXPECT_EQ(run.exit_code, 2);

@@ -363,7 +363,7 @@ std::unique_ptr<CLI::App> diveImportCommandLine(DiveImportArgumentText* text) {
          "camera_matrix, distortion_coefficients) or the short form (image_width,\n"
          "image_height, K: [9], D: [4..5]). Every image must have this size. Required;\n"
          "unknown intrinsics: self_calibrate --images DIR --output K.yaml estimates them,\n"
-         "or mosaic_video does it all from a video");
+         "or mosaic_video VIDEO --altitude M --output DIR does it all from a video");
   option("--output", &text->output, "OUT.bag", "Inputs",
          "bag to write; written under a temporary name and renamed when complete")
       ->required();
@@ -485,8 +485,9 @@ DiveImportOptions parseDiveImportArguments(const std::vector<std::string>& args)
     failInput(
         "--camera is required: the bag's /camera/camera_info needs the camera's intrinsics. Unknown intrinsics: "
         "estimate them from the dive's images first with `rosrun exocet_mosaic self_calibrate --images DIR --output "
-        "camera.yaml` (a folder of images; or --bag BAG --image-topic TOPIC) and give --camera camera.yaml, or run "
-        "`rosrun exocet_mosaic mosaic_video`, which calibrates, imports and mosaics a video in one go");
+        "camera.yaml` (a folder of images; or --bag BAG --image-topic TOPIC) and give --camera camera.yaml; or, for a "
+        "video, run `rosrun exocet_mosaic mosaic_video VIDEO --altitude M --output DIR`, which self-calibrates and "
+        "mosaics it in one go");
   std::string altitude_text, heading_text;
   const bool has_altitude = take("--altitude", text.altitude, &altitude_text);
   const bool has_heading = take("--heading", text.heading, &heading_text);

@@ -93,6 +93,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   path_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0 / config_.path_rate_hz),
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
+  images_only_ = config_.odometry_topic.empty() && config_.nav_fix_topic.empty() && config_.usbl_topic.empty();
   initializeFromParameters();
   if (config_.view_half_window_s > config_.reorder_delay_s)
     ROS_WARN(
@@ -235,9 +236,27 @@ void FusionRos::initializeFromParameters() {
     front_end_->setOperatorStart(gridFor(c.initial_latitude_deg, c.initial_longitude_deg)
                                      ->toGrid(c.initial_latitude_deg, c.initial_longitude_deg),
                                  c.initial_sigma_m);
+    operator_start_given_ = true;
   } else if (std::isfinite(c.initial_easting_m) && std::isfinite(c.initial_northing_m)) {
     front_end_->setOperatorStart(Eigen::Vector2d(c.initial_easting_m, c.initial_northing_m), c.initial_sigma_m);
+    operator_start_given_ = true;
   }
+}
+
+void FusionRos::startInLocalFrame() {
+  if (!local_world_) {
+    world_frame_ = config_.map_frame;
+    local_world_ = true;
+    ROS_WARN(
+        "fusion: no navigation and no first point (~initial_latitude_deg/~initial_longitude_deg, "
+        "~initial_easting_m/~initial_northing_m or ~set_initial_pose): the track starts at (0, 0) in the local frame "
+        "'%s' (metres; y points along the first heading, ~initial_heading_deg, 0 if unset) and the tiles are in that "
+        "local frame, not geo-referenced",
+        world_frame_.c_str());
+  }
+  // The images carry a heading on but need one to start from: the local frame's y axis if none is given.
+  if (!front_end_->operatorHeading()) front_end_->setOperatorHeading(enuYawFromHeading_rad(0.0));
+  front_end_->setOperatorStart(Eigen::Vector2d::Zero(), config_.initial_sigma_m);
 }
 
 bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
@@ -249,6 +268,10 @@ bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
     if (latlon == grid)
       throw std::invalid_argument(
           "give either latitude_deg/longitude_deg or easting_m/northing_m (the other pair NaN)");
+    if (latlon && local_world_)
+      throw std::invalid_argument("the dive is mapped in the local frame '" + world_frame_ +
+                                  "' (no datum or first point at its start): give easting_m/northing_m in that frame, "
+                                  "or replay it with ~initial_latitude_deg/~initial_longitude_deg");
     if (!(request.position_sigma_m > 0.0 && request.position_sigma_m <= 10000.0))
       throw std::invalid_argument("position_sigma_m must be in (0, 10000] m");
     if (std::isfinite(request.heading_deg) && !(request.heading_deg >= -360.0 && request.heading_deg <= 360.0))
@@ -263,6 +286,7 @@ bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
       front_end_->setOperatorHeading(enuYawFromHeading_rad(request.heading_deg * M_PI / 180.0));
     if (std::isfinite(request.altitude_m)) front_end_->setOperatorHeight(request.altitude_m);
     front_end_->setOperatorStart(en, request.position_sigma_m);
+    operator_start_given_ = true;
     if (front_end_->filter().initialized()) {
       // Re-seeding during a dive: start again from the given point at the newest stamp.
       front_end_->filter().reset();
@@ -515,6 +539,7 @@ void FusionRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
 }
 
 void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
+  if (images_only_ && !operator_start_given_ && !front_end_->filter().initialized()) startInLocalFrame();
   fu::ImageMotionInput motion;
   motion.previous_stamp_s = msg.previous_stamp.toSec();
   motion.stamp_s = msg.header.stamp.toSec();
@@ -608,7 +633,11 @@ void FusionRos::publishState(const ros::Time& stamp) {
   if (!front_end_->filter().initialized() || stamp == last_published_stamp_) return;
   last_published_stamp_ = stamp;
   const fu::FilterState s = front_end_->filter().current();
-  const auto attitude = front_end_->attitudeAt(stamp.toSec());
+  std::optional<Eigen::Quaterniond> attitude = front_end_->attitudeAt(stamp.toSec());
+  // No attitude sensor: the operator's heading as the images carried it on, the vehicle level, as the front end
+  // takes it for the motions; the camera height and the tiles' orientation need it.
+  if (!attitude && front_end_->operatorHeading())
+    attitude = Eigen::Quaterniond(Eigen::AngleAxisd(*front_end_->operatorHeading(), Eigen::Vector3d::UnitZ()));
   const auto camera = front_end_->cameraMount();
 
   nav_msgs::Odometry odometry;
@@ -660,7 +689,7 @@ void FusionRos::publishState(const ros::Time& stamp) {
 }
 
 void FusionRos::publishDatum() {
-  if (!datum_pub_ || !grid_) return;
+  if (!datum_pub_ || !grid_ || local_world_) return;  // a local frame has no zone
   const int key = grid_->zone() * 2 + (grid_->northern() ? 1 : 0);
   if (key == published_datum_zone_ && published_datum_has_origin_ == map_origin_en_m_.has_value()) return;
   exocet_msgs::GeoDatum datum;

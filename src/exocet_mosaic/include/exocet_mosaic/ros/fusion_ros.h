@@ -105,6 +105,8 @@ class FusionRos {
   /// The filter has just started (from `source`): the map origin and a log line.
   void onStarted(const std::string& source);
   void initializeFromParameters();
+  /// Images only and no first point: the dive is mapped from (0, 0) in the local frame ~map_frame (said once).
+  void startInLocalFrame();
 
   // Outputs.
   void publishState(const ros::Time& stamp);
@@ -146,6 +148,11 @@ class FusionRos {
   /// (no datum, no ~utm_zone, no latitude/longitude): the dive is then not geo-referenced.
   std::string world_frame_;
   bool local_world_ = false;
+  /// No navigation is expected (no dead reckoning, no fixes): the operator's point or, failing one, (0, 0) in the
+  /// local frame ~map_frame starts the filter.
+  bool images_only_ = false;
+  /// A first position was given (~initial_* or ~set_initial_pose): the images-only dive is geo-referenced.
+  bool operator_start_given_ = false;
   std::optional<Eigen::Vector2d> map_origin_en_m_;  ///< utm -> map offset (rviz cannot draw UTM-sized floats)
 
   // Mounts on the vehicle, looked up once each from tf.
