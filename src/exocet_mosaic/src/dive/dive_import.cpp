@@ -329,7 +329,7 @@ Without --nav
   No /nav/odometry, /nav/depth. The bag replays in the fusion's images-only mode: the tool prints the
   command and writes OUT.bag.replay.json, which replay_dive reads (rosrun exocet_mosaic replay_dive OUT.bag
   OUTDIR). With --origin-lat/--origin-lon the tiles are in that point's UTM zone, the start heading being
-  --heading (0 if not given); without them, in the local frame "map" (metres, x east, y north of --heading).
+  --heading (0 if not given); without them, in the local frame "map" (metres; y along the first heading).
 
 Exit status: 0 done, 2 bad arguments or input (the message names the argument, file, line and column),
 1 I/O failure, 128+N killed by signal N (SIGINT, SIGTERM). On any error no file is left under OUT.bag.)";
