@@ -248,8 +248,8 @@ SequenceScore subset(const SequenceScore& all, const std::function<bool(int)>& s
 int main(int argc, char** argv) {
   exocet_common::BenchmarkPaths paths;
   const std::string config_dir = exocet_common::testing::configDir();
-  int frames_limit = 0;
-  std::vector<std::string> part_list = {"accuracy", "peers", "speed"}, method_list;
+  int frames_limit = 0, wreck_frames_limit = 0;
+  std::vector<std::string> part_list = {"accuracy", "peers", "speed", "wreck"}, method_list;
   CLI::App app(
       "bench_registration: accuracy and speed of the frame-to-frame registration (KLT, RMR, auto) on a\n"
       "simulated dive and the Sparus AUV frames, beside OpenCV's ECC and an ORB feature pipeline.\n"
@@ -260,12 +260,17 @@ int main(int argc, char** argv) {
       ->type_name("N")
       ->check(exocet_common::atLeast(0))
       ->capture_default_str();
+  app.add_option("--wreck-frames", wreck_frames_limit, "frames of the wreck dive (0: all)")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(0))
+      ->capture_default_str();
   app.add_option("--only", part_list,
                  "comma-separated subset of accuracy (simulated dive and Sparus), peers (OpenCV ECC\n"
-                 "and ORB), speed (ours, one thread, PAL and HD); default all")
+                 "and ORB), speed (ours, one thread, PAL and HD), wreck (KLT and RMR over strong relief);\n"
+                 "default all")
       ->type_name("PARTS")
       ->delimiter(',')
-      ->check(CLI::IsMember({"accuracy", "peers", "speed"}));
+      ->check(CLI::IsMember({"accuracy", "peers", "speed", "wreck"}));
   app.add_option("--methods", method_list,
                  "comma-separated subset of klt, rmr, auto, klt_similarity, rmr_similarity, klt_affine,\n"
                  "rmr_affine (accuracy), and of klt, rmr, auto (speed); default all")
@@ -278,7 +283,8 @@ int main(int argc, char** argv) {
   std::set<std::string> methods;
   for (const std::string& m : method_list)
     if (!m.empty()) methods.insert(m);
-  const bool accuracy = parts.count("accuracy"), peers = parts.count("peers"), timing = parts.count("speed");
+  const bool accuracy = parts.count("accuracy"), peers = parts.count("peers"), timing = parts.count("speed"),
+             wreck = parts.count("wreck");
   auto wanted = [&methods](const std::string& key) { return methods.empty() || methods.count(key) > 0; };
   cv::setNumThreads(1);
   std::cout << std::unitbuf;  // progress lines appear as they happen, also when redirected to a file
@@ -454,6 +460,51 @@ int main(int argc, char** argv) {
     } else {
       std::cout << "sparus: no frames under " << shared << "/sparus_auv/frames\n";
     }
+  }
+
+  // ---- Strong relief: the wreck dive (config/dives/wreck.yaml) ----
+  if (wreck) {
+    std::vector<std::string> wreck_overrides;
+    if (wreck_frames_limit > 0) wreck_overrides.push_back("duration_s=" + std::to_string(wreck_frames_limit / 25.0 - 0.01));
+    const sim::DiveDescription wreck_dive = sim::loadDiveDescription(config_dir + "/dives/wreck.yaml", wreck_overrides);
+    t0 = Clock::now();
+    const sim::RenderedDive w = sim::renderDiveCached(wreck_dive, 2, out_dir + "/cache");
+    std::cout << "rendered " << w.gray.size() << " PAL frames of the wreck dive in " << msSince(t0) / 1000.0 << " s\n";
+    // Truth: the dominant plane's homography (the flat seabed z = 0 under the objects).
+    for (const int stride : {1, 4}) {
+      std::vector<cv::Mat> frames;
+      std::vector<double> stamps;
+      std::vector<Eigen::Isometry3d> poses;
+      for (size_t i = 0; i < w.gray.size(); i += stride) {
+        frames.push_back(w.gray[i]);
+        stamps.push_back(w.stamps_s[i]);
+        poses.push_back(w.local_from_camera[i]);
+      }
+      std::vector<Eigen::Matrix3d> wreck_truth(frames.size(), Eigen::Matrix3d::Identity());
+      for (size_t i = 1; i < frames.size(); ++i)
+        wreck_truth[i] = sim::seabedPlaneHomography(w.camera, poses[i - 1], poses[i]);
+      for (const Candidate& c : {candidates[0], candidates[1]}) {
+        SequenceRegistrar r(makeRegistrar(configFor(c.method, c.model)), SequenceRegistrarConfig());
+        t0 = Clock::now();
+        const SequenceScore s = evaluateSequence(r, frames, stamps, wreck_truth);
+        const std::string key = "wreck_" + c.key;
+        json[key + "_failure_rate_s" + std::to_string(stride)] = s.failure_rate;
+        if (stride == 1) {
+          json[key + "_median_px"] = s.median_px;
+          json[key + "_p95_px"] = s.p95_px;
+          json[key + "_nees_ratio"] = s.nees_ratio;
+          json[key + "_gross_failure_rate"] = s.gross_failure_rate;
+          json[key + "_fps"] = 1000.0 * frames.size() / msSince(t0);
+        } else {
+          json[key + "_median_px_s" + std::to_string(stride)] = s.median_px;
+          json[key + "_p95_px_s" + std::to_string(stride)] = s.p95_px;
+        }
+        std::cout << "wreck " << c.key << " stride " << stride << ": median " << s.median_px << " px, p95 " << s.p95_px
+                  << " px, max " << s.max_px << ", failed " << s.failures << " of " << s.pairs.size() << ", gross "
+                  << s.gross_failures << ", NEES ratio " << s.nees_ratio << "\n";
+      }
+    }
+    json["wreck_pairs"] = double(w.gray.size() - 1);
   }
 
   // ---- Table (of what this run measured) ----

@@ -169,6 +169,8 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   seabed.get("cache_budget_mb", &d.seabed.cache_budget_mb);
   seabed.get("relief", &d.seabed.relief);
   seabed.get("relief_scale", &d.seabed.relief_scale);
+  seabed.get("objects", &d.seabed.objects);
+  seabed.get("objects_density_per_m2", &d.seabed.objects_density_per_m2);
   seabed.get("image", &d.seabed.image);
   seabed.get("image_pixel_size_m", &d.seabed.image_pixel_size_m);
   seabed.get("image_center_x_m", &d.seabed.image_center_x_m);
@@ -345,6 +347,13 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
     throw std::invalid_argument("seabed.kind is image but seabed.image (a file path) is not given");
   if (!(d.seabed.relief_scale >= 0.0 && d.seabed.relief_scale <= 2.0))
     throw std::invalid_argument("seabed.relief_scale = " + std::to_string(d.seabed.relief_scale) + " out of range [0, 2]");
+  if (d.seabed.objects != "none" && d.seabed.objects != "wreck" && d.seabed.objects != "boulders")
+    throw std::invalid_argument("seabed.objects = '" + d.seabed.objects + "' is not one of none, wreck, boulders");
+  if (d.seabed.objects != "none" && d.seabed.kind != "procedural")
+    throw std::invalid_argument("seabed.objects = '" + d.seabed.objects + "' needs seabed.kind = procedural");
+  if (d.seabed.objects_density_per_m2 > 5.0)
+    throw std::invalid_argument("seabed.objects_density_per_m2 = " + std::to_string(d.seabed.objects_density_per_m2) +
+                                " out of range [0, 5] (negative: the preset's)");
 
   s.geo = exocet_common::makeGeoReference(d.origin_latitude_deg, d.origin_longitude_deg);
   const std::string problem = s.validate();
@@ -390,6 +399,8 @@ std::string toYaml(const DiveDescription& d) {
   e << YAML::Key << "kind" << YAML::Value << d.seabed.kind << YAML::Key << "texel_m" << YAML::Value << d.seabed.texel_m
     << YAML::Key << "cache_budget_mb" << YAML::Value << d.seabed.cache_budget_mb << YAML::Key << "relief"
     << YAML::Value << d.seabed.relief << YAML::Key << "relief_scale" << YAML::Value << d.seabed.relief_scale
+    << YAML::Key << "objects" << YAML::Value << d.seabed.objects << YAML::Key << "objects_density_per_m2"
+    << YAML::Value << d.seabed.objects_density_per_m2
     << YAML::Key << "image" << YAML::Value << d.seabed.image << YAML::Key << "image_pixel_size_m" << YAML::Value
     << d.seabed.image_pixel_size_m << YAML::Key << "image_center_x_m" << YAML::Value << d.seabed.image_center_x_m
     << YAML::Key << "image_center_y_m" << YAML::Value << d.seabed.image_center_y_m << YAML::EndMap;

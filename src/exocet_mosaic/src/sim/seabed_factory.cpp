@@ -1,6 +1,7 @@
 // Builds the seabed (texture and relief) a dive description asks for.
 #include <stdexcept>
 
+#include "exocet_mosaic/sim/debris_field.h"
 #include "exocet_mosaic/sim/dive_description.h"
 #include "exocet_mosaic/sim/image_seabed.h"
 #include "exocet_mosaic/sim/procedural_seabed.h"
@@ -36,6 +37,13 @@ Seabed makeSeabed(const SeabedSpec& spec, uint64_t seed) {
     seabed.relief = std::make_unique<ProceduralRelief>(config);
   else
     seabed.relief = std::make_unique<FlatRelief>();
+  if (spec.objects != "none") {
+    DebrisFieldConfig debris = DebrisFieldConfig::fromPreset(spec.objects, seed);
+    if (spec.objects_density_per_m2 >= 0.0) debris.density_per_m2 = spec.objects_density_per_m2;
+    auto relief = std::make_unique<DebrisRelief>(debris, std::move(seabed.relief));
+    seabed.texture = std::make_unique<DebrisTexture>(std::move(seabed.texture), relief.get(), seed);
+    seabed.relief = std::move(relief);
+  }
   return seabed;
 }
 

@@ -112,6 +112,8 @@ int main(int argc, char** argv) {
       },
       "waypoints (header x_m,y_m[,altitude_m][,speed_mps]); implies --trajectory waypoints");
   flag("--relief", {"seabed.relief=true"}, "seabed with relief (rocks, mounds, slopes) instead of a plane");
+  shortcut("--objects", "wreck|boulders", key("seabed.objects"),
+           "objects 0.2-0.6 m tall with steep sides on the seabed: piled amphorae and blocks, or boulders");
   shortcut(
       "--seabed-image", "FILE",
       [](const std::string& v) {

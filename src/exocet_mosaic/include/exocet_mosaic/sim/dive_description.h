@@ -26,6 +26,9 @@ struct SeabedSpec {
   double cache_budget_mb = 256.0;   ///< procedural: memory for generated tiles
   bool relief = false;              ///< procedural: rocks, mounds and slopes in 3D (else a plane)
   double relief_scale = 1.0;        ///< multiplies the relief heights (0..2)
+  /// Objects with steep sides on the seabed (debris_field.h): none | wreck (piled amphorae, blocks) | boulders.
+  std::string objects = "none";
+  double objects_density_per_m2 = -1.0;  ///< mean objects per square metre [0, 5]; < 0: the preset's
   std::string image;                ///< image: path of the seabed picture (top row = north)
   double image_pixel_size_m = 0.005;  ///< image: ground size of one pixel
   double image_center_x_m = 0.0;    ///< image: local position of the picture's centre
