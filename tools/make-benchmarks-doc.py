@@ -52,6 +52,36 @@ BENCHMARKS = {
             ('threads', 'rendering threads'),
         ],
     },
+    'mosaic_video.json': {
+        'title': 'One command from a video to tiles (mosaic_video)',
+        'command': 'devel/lib/exocet_mosaic/bench_mosaic_video --output-dir out/bench --shared-data ../shared/data',
+        'measures': 'The `mosaic_video` tool end to end (its core, `VideoMosaicker`: registration, images-only '
+                    'fusion, composer, GeoTIFF writer in one process) on a rendered video with the navigation '
+                    'withheld, beside OpenCV\'s `cv::Stitcher` (SCANS); the real Sparus II video with and without '
+                    'its navigation.',
+        'data': '`src/exocet_mosaic/config/dives/bench_mosaic_video.yaml`: PAL at 10 frames/s, out and back along '
+                'a 10 m line at 2.5 m over a wreck site (`seabed.objects: wreck`), eight checker targets; the tool '
+                'gets the start point, the heading and the altitude only. Sparus: `../shared/data/sparus_auv`.',
+        'method': [
+            'Frames placed: frames with a fused pose composed into the mosaic, over the frames read.',
+            'Landmark distances: the checker targets found in the tiles (template match, then the saddle to a '
+            'fraction of a pixel); the distance between every pair of sightings against the surveyed distance, in '
+            'per cent (median, p95).',
+            '`cv::Stitcher` SCANS on every 10th frame in a child process abandoned after the time limit '
+            '(`stitcher_seconds` null when it did not finish).',
+        ],
+        'targets': [
+            'Frames placed at least 99 %; landmark distances within 1 %; at least 100 frames/s end to end (PAL).',
+        ],
+        'figures': [
+            ('frames_placed_fraction', 'fraction of the frames placed'),
+            ('landmark_distance_err_pct', 'median error of the distances between landmark sightings (%)'),
+            ('fps_pal', 'frames per second end to end (PAL)'),
+            ('seconds', 'wall time of the tool on the rendered video (s)'),
+            ('stitcher_seconds', 'cv::Stitcher SCANS wall time (s), null if unfinished'),
+            ('sparus_frames_placed', 'Sparus II: frames placed without navigation'),
+        ],
+    },
     'registration.json': {
         'title': 'Frame-to-frame registration',
         'command': 'devel/lib/exocet_mosaic/bench_registration --output-dir out/bench --shared-data ../shared/data '
@@ -68,7 +98,10 @@ BENCHMARKS = {
                 'motion between two frames is exactly the seabed plane\'s homography, computed from the simulator\'s '
                 'camera poses. The HD speed uses the first 12 s of the same dive rendered at 1920x1080. '
                 'Real: the 22 frames (384x288) of the Sparus II AUV sample (`../shared/data/sparus_auv`), undistorted '
-                'with the dataset\'s intrinsics. The node figures replay `bags/sample_out_and_back.bag` (JPEG, PAL).',
+                'with the dataset\'s intrinsics. The node figures replay `bags/sample_out_and_back.bag` (JPEG, PAL). '
+                'Strong relief (`wreck_*`): `src/exocet_mosaic/config/dives/wreck.yaml`, 1500 PAL frames (60 s) out '
+                'and back at 1.5-3 m over piles of amphorae and blocks 0.2-0.6 m tall with sides up to 72 degrees '
+                '(`seabed.objects: wreck`) on a flat seabed, a lamp offset to starboard with a narrow cone.',
         'method': [
             'Corner-transfer error: for each image pair, the largest distance (px) between where the estimated and '
             'the true motion send the four image corners. Median and p95 are over the pairs the method did not '
@@ -90,6 +123,9 @@ BENCHMARKS = {
             '`*_fps_*_cpu` per second of the thread\'s CPU time. `klt_fps_pal` and `rmr_fps_pal` use the '
             'similarity model, `*_homography_fps_*` the homography. On a shared machine the wall-clock rate varies '
             'with the load; the CPU rate much less.',
+            'Wreck: KLT and RMR (homography) over every pair (stride 1) and over every 4th frame (stride 4, '
+            '`*_s4`), against the dominant plane\'s homography (the flat seabed under the objects): the parallax '
+            'of the objects is what a method must not report as the seabed\'s motion.',
             'Sparus: every consecutive pair registered (homography) and compared, by the same corner distance, with '
             'a SIFT + RANSAC (MAGSAC++) homography of the same pair.',
             'Node: `registration_node` with `src/exocet_mosaic/config/registration/pal_survey.yaml` on a private ROS master; the '
@@ -98,6 +134,8 @@ BENCHMARKS = {
         ],
         'targets': [
             'KLT at least 400 frames/s on PAL and 150 on HD; RMR at least 100 and 30 (one thread).',
+            'Wreck: KLT and RMR failures at most 0.5 % at strides 1 and 4; KLT median at most 0.3 px, p95 at most '
+            '1 px, NEES ratio between 0.5 and 2 (stride 1).',
             'Median error at most 0.1 px, p95 at most 0.5 px, gross failures at most 0.5 % (homography model).',
             'The similarity and affine models cannot meet them on this dive: a rolling and pitching camera sees '
             'perspective, which only the homography holds. The mosaic chain (`src/exocet_mosaic/launch/mosaic_chain.launch`) '
@@ -105,6 +143,11 @@ BENCHMARKS = {
         ],
         'figures': [
             ('*_dark_median_px', 'median corner error (px) in the dark stretch'),
+            ('wreck_*_failure_rate_s1', 'wreck: fraction of consecutive pairs reported as failed'),
+            ('wreck_*_failure_rate_s4', 'wreck: fraction of pairs 4 frames apart reported as failed'),
+            ('wreck_*_px_s4', 'wreck, pairs 4 frames apart: corner error against the dominant plane (px)'),
+            ('wreck_*_fps', 'wreck: frames registered per second in the accuracy run (wall clock)'),
+            ('wreck_pairs', 'wreck: consecutive pairs scored'),
             ('*_turbid_median_px', 'median corner error (px) in the turbid stretch'),
             ('sparus_*_max_corner_px', 'Sparus: largest corner difference to SIFT + RANSAC (px)'),
             ('sparus_*_median_corner_px', 'Sparus: median corner difference to SIFT + RANSAC (px)'),
