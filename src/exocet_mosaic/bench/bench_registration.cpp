@@ -484,6 +484,7 @@ int main(int argc, char** argv) {
       for (size_t i = 1; i < frames.size(); ++i)
         wreck_truth[i] = sim::seabedPlaneHomography(w.camera, poses[i - 1], poses[i]);
       for (const Candidate& c : {candidates[0], candidates[1]}) {
+        if (!wanted(c.key)) continue;
         SequenceRegistrar r(makeRegistrar(configFor(c.method, c.model)), SequenceRegistrarConfig());
         t0 = Clock::now();
         const SequenceScore s = evaluateSequence(r, frames, stamps, wreck_truth);
@@ -502,6 +503,10 @@ int main(int argc, char** argv) {
         std::cout << "wreck " << c.key << " stride " << stride << ": median " << s.median_px << " px, p95 " << s.p95_px
                   << " px, max " << s.max_px << ", failed " << s.failures << " of " << s.pairs.size() << ", gross "
                   << s.gross_failures << ", NEES ratio " << s.nees_ratio << "\n";
+        for (const PairScore& p : s.pairs)
+          if (p.failed)
+            std::cout << "  failed pair " << p.index * stride - stride << "-" << p.index * stride << ": "
+                      << toString(p.failure) << "\n";
       }
     }
     json["wreck_pairs"] = double(w.gray.size() - 1);
