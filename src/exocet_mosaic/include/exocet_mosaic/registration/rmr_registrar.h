@@ -62,7 +62,7 @@ struct RmrConfig {
   int pyramid_levels = 5;              ///< [1, 10] levels including the full-resolution one
   int min_level_size_px = 32;          ///< [8, 1024] fewer levels when the coarsest's smaller side would be less
   int finest_level = 0;                ///< [0, pyramid_levels - 1] level of the final estimate (0: full resolution)
-  int max_iterations_per_level = 12;   ///< [1, 200] Gauss-Newton/IRLS iterations at most per level
+  int max_iterations_per_level = 24;   ///< [1, 200] Gauss-Newton/IRLS iterations at most per level
   double convergence_px = 0.01;        ///< (0, 1] finest level: stop when an increment moves no corner further
   double coarse_convergence_px = 0.2;  ///< (0, 1] same at the coarser levels (their estimate is refined anyway)
   double max_step_px = 2.0;            ///< (0, 100] longest corner displacement of one increment (pixels of the
