@@ -21,34 +21,18 @@
 
 #include "exocet_common/testing/paths.h"
 #include "exocet_common/testing/temp_dir.h"
+#include "tool_runner.h"
 
 namespace {
 
 using exocet_common::testing::TempDir;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using exocet_mosaic::testing::readText;
+using exocet_mosaic::testing::RunResult;
 
-std::string readText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-/// Runs the built `tool` of this package with `args`, capturing its exit code, stdout and stderr.
+/// Runs the built `tool` of this package with `args`.
 RunResult run(const std::string& tool, const std::vector<std::string>& args, const TempDir& scratch) {
-  std::string command = "'" + exocet_common::testing::executableDir() + "/" + tool + "'";
-  for (const auto& a : args) command += " '" + a + "'";
-  command += " >'" + scratch.file("stdout") + "' 2>'" + scratch.file("stderr") + "'";
-  const int status = std::system(command.c_str());
-  RunResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = readText(scratch.file("stdout"));
-  r.err = readText(scratch.file("stderr"));
-  return r;
+  return exocet_mosaic::testing::runTool(tool, args, scratch);
 }
 
 void expectMentions(const std::string& text, const std::vector<std::string>& parts, const std::string& what) {

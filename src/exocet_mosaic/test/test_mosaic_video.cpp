@@ -31,6 +31,7 @@
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/video/video_run.h"
+#include "tool_runner.h"
 #include "video_fixtures.h"
 
 namespace {
@@ -52,12 +53,8 @@ trajectory: {kind: out_and_back, heading_deg: 75, speed_mps: 0.4, line_length_m:
 imaging: {light_cone_strength: 0.4, vignetting: 0.2, noise_sigma_dn: 1.0}
 )";
 
-std::string readText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using exocet_mosaic::testing::readText;
+using exocet_mosaic::testing::RunResult;
 
 class MosaicVideo : public ::testing::Test {
  protected:
@@ -205,21 +202,8 @@ TEST_F(MosaicVideo, PlacesEveryFrameAtItsTrueDistanceAndDirection) {
 
 // ---- The built tool as a process ------------------------------------------------------------------------------------
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
 RunResult runTool(const std::vector<std::string>& args, const TempDir& scratch) {
-  std::string command = "'" + exocet_common::testing::executableDir() + "/mosaic_video'";
-  for (const auto& a : args) command += " '" + a + "'";
-  command += " >'" + scratch.file("stdout") + "' 2>'" + scratch.file("stderr") + "'";
-  const int status = std::system(command.c_str());
-  RunResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = readText(scratch.file("stdout"));
-  r.err = readText(scratch.file("stderr"));
-  return r;
+  return exocet_mosaic::testing::runTool("mosaic_video", args, scratch);
 }
 
 TEST_F(MosaicVideo, BadInputsExitTwoWithOneLineNamingTheArgument) {
