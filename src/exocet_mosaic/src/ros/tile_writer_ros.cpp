@@ -14,6 +14,7 @@
 #include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
+#include "exocet_mosaic/tiles/closed_mosaic_tile.h"
 
 namespace exocet_mosaic {
 
@@ -551,26 +552,9 @@ void TileWriterRos::writerLoop() {
       }
       continue;
     }
-    tiles::TileRaster raster;
-    raster.image = pending.mosaic.image;
-    raster.mask = pending.mosaic.mask;
-    raster.origin_easting_m = pending.mosaic.origin_easting_m;
-    raster.origin_northing_m = pending.mosaic.origin_northing_m;
-    raster.gsd_m = pending.mosaic.gsd_m;
-    raster.utm_zone = utm_zone_.value_or(0);
-    raster.northern_hemisphere = northern_;
-    raster.local_frame = local_frame_;
-    tiles::TileMetadata metadata;
-    metadata.dive_name = config_.dive_name;
-    metadata.first_frame = pending.mosaic.first_frame;
-    metadata.last_frame = pending.mosaic.last_frame;
-    metadata.start_time_s = pending.mosaic.start_time_s;
-    metadata.end_time_s = pending.mosaic.end_time_s;
-    metadata.mean_altitude_m = pending.mosaic.mean_camera_height_m;
-    metadata.close_reason = pending.mosaic.close_reason;
-    metadata.extra["frames_composed"] = std::to_string(pending.mosaic.frames_composed);
-    metadata.extra["position_sigma_m"] = std::to_string(pending.mosaic.anchor_sigma_m);
-    metadata.extra["blend"] = pending.mosaic.blend;
+    const tiles::TileRaster raster =
+        tiles::tileRaster(pending.mosaic, utm_zone_.value_or(0), northern_, local_frame_);
+    const tiles::TileMetadata metadata = tiles::tileMetadata(pending.mosaic, config_.dive_name);
     if (files_update_) {
       writer_ = std::make_unique<tiles::GeoTiffTileWriter>(*files_update_);
       files_update_.reset();

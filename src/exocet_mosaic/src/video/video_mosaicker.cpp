@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_mosaic/registration/gray_converter.h"
+#include "exocet_mosaic/tiles/closed_mosaic_tile.h"
 
 namespace exocet_mosaic {
 namespace video {
@@ -225,26 +226,9 @@ void VideoMosaicker::writeTile(compose::ClosedMosaic mosaic) {
     mosaic.anchor_sigma_m = std::max(mosaic.anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
   }
   tile_fused_sigmas_m_.clear();
-  tiles::TileRaster raster;
-  raster.image = mosaic.image;
-  raster.mask = mosaic.mask;
-  raster.origin_easting_m = mosaic.origin_easting_m;
-  raster.origin_northing_m = mosaic.origin_northing_m;
-  raster.gsd_m = mosaic.gsd_m;
-  raster.utm_zone = config_.utm_zone;
-  raster.northern_hemisphere = config_.northern_hemisphere;
-  raster.local_frame = config_.local_frame;
-  tiles::TileMetadata metadata;
-  metadata.dive_name = config_.dive_name;
-  metadata.first_frame = mosaic.first_frame;
-  metadata.last_frame = mosaic.last_frame;
-  metadata.start_time_s = mosaic.start_time_s;
-  metadata.end_time_s = mosaic.end_time_s;
-  metadata.mean_altitude_m = mosaic.mean_camera_height_m;
-  metadata.close_reason = mosaic.close_reason;
-  metadata.extra["frames_composed"] = std::to_string(mosaic.frames_composed);
-  metadata.extra["position_sigma_m"] = std::to_string(mosaic.anchor_sigma_m);
-  metadata.extra["blend"] = mosaic.blend;
+  const tiles::TileRaster raster =
+      tiles::tileRaster(mosaic, config_.utm_zone, config_.northern_hemisphere, config_.local_frame);
+  tiles::TileMetadata metadata = tiles::tileMetadata(mosaic, config_.dive_name);
   metadata.extra["scale_approximate"] = config_.scale_approximate ? "true" : "false";
   if (config_.scale_approximate)
     metadata.extra["scale_note"] =
