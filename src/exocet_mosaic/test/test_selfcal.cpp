@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
+#include <random>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
@@ -440,6 +442,66 @@ TEST(SelfCalibration, RefusesMotionsThatDoNotConstrainTheIntrinsics) {
     EXPECT_EQ(e.reason(), CalibrationImpossible::Reason::kUnconstrained);
     EXPECT_NE(std::string(e.what()).find("do not constrain"), std::string::npos) << e.what();
   }
+}
+
+TEST(SelfCalibration, KeyFrameBootstrapCoversErrorsSharedThroughTheKeyFrames) {
+  // Tracking errors shared by all the pairs of a key frame (here a small random affine warp of each key frame's
+  // points, as a drifting track or a lamp moving the shading would give): the pairs are not independent, and the
+  // 1-sigma must still cover the errors. Weak roll and pitch (3 deg), where the focal length is least constrained.
+  const int runs = 5;
+  int covered = 0, covered_by_residuals = 0, checked = 0;
+  for (int run = 0; run < runs; ++run) {
+    scenes::SyntheticSequenceConfig c;
+    c.seed = 500 + run;
+    c.key_frames = 10;
+    c.roll_pitch_deg = 3.0;
+    c.noise_px = 0.2;
+    scenes::SyntheticSequence seq = scenes::makeSyntheticSequence(c);
+    std::mt19937_64 rng(900 + run);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    std::map<int, Eigen::Matrix<double, 2, 3>> warp;
+    auto warpOf = [&](int key) -> const Eigen::Matrix<double, 2, 3>& {
+      if (!warp.count(key)) {
+        Eigen::Matrix<double, 2, 3> a;
+        a.leftCols<2>() = Eigen::Matrix2d::Identity() + 1e-3 * Eigen::Matrix2d::NullaryExpr([&]() { return unit(rng); });
+        a.col(2) = Eigen::Vector2d(0.5 * unit(rng), 0.5 * unit(rng));
+        // About the image centre, so that the shift is the shift.
+        a.col(2) += (Eigen::Matrix2d::Identity() - a.leftCols<2>()) * Eigen::Vector2d(360.0, 288.0);
+        warp[key] = a;
+      }
+      return warp[key];
+    };
+    for (KeyFramePair& pair : seq.pairs)
+      for (size_t m = 0; m < pair.points_a.size(); ++m) {
+        pair.points_a[m] = warpOf(pair.key_a) * pair.points_a[m].homogeneous();
+        pair.points_b[m] = warpOf(pair.key_b) * pair.points_b[m].homogeneous();
+      }
+    SelfCalibrationConfig config;
+    config.max_relative_sigma = 1.0;  // measured here, not refused
+    const SelfCalibrationResult r = selfCalibrate(seq.pairs, c.image_size, config);
+    ASSERT_EQ(r.uncertainty, "key-frame bootstrap");
+    EXPECT_GE(r.bootstrap_replicates_used, config.bootstrap_replicates / 2);
+    const double value[4] = {r.intrinsics.value.alpha_u, r.intrinsics.value.alpha_v, r.intrinsics.value.u0,
+                             r.intrinsics.value.v0};
+    const double sigma[4] = {r.intrinsics.sigma.alpha_u, r.intrinsics.sigma.alpha_v, r.intrinsics.sigma.u0,
+                             r.intrinsics.sigma.v0};
+    const double residual[4] = {r.residual_sigma.alpha_u, r.residual_sigma.alpha_v, r.residual_sigma.u0,
+                                r.residual_sigma.v0};
+    const double truth[4] = {c.truth.alpha_u, c.truth.alpha_v, c.truth.u0, c.truth.v0};
+    for (int i = 0; i < 4; ++i) {
+      EXPECT_GE(sigma[i], residual[i]);
+      covered += std::abs(value[i] - truth[i]) <= 2.0 * sigma[i];
+      covered_by_residuals += std::abs(value[i] - truth[i]) <= 2.0 * residual[i];
+      ++checked;
+    }
+    if (run == 0) {  // same seed, same answer
+      const SelfCalibrationResult again = selfCalibrate(seq.pairs, c.image_size, config);
+      EXPECT_EQ(again.intrinsics.sigma.alpha_u, r.intrinsics.sigma.alpha_u);
+    }
+  }
+  std::cout << covered << "/" << checked << " errors within 2 sigma (" << covered_by_residuals
+            << " within 2 residual-based sigma)\n";
+  EXPECT_GE(covered, 0.85 * checked);
 }
 
 TEST(SelfCalibration, RefusesTooFewTracks) {

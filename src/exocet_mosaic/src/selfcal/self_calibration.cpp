@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <map>
+#include <optional>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -21,6 +24,8 @@ std::string SelfCalibrationConfig::validate() const {
   if (!(planar_majority >= 0.0 && planar_majority < 1.0))
     err << "planar_majority = " << planar_majority << " out of range [0, 1); ";
   if (!(max_relative_sigma > 0.0)) err << "max_relative_sigma = " << max_relative_sigma << " must be > 0; ";
+  if (bootstrap_replicates != 0 && (bootstrap_replicates < 20 || bootstrap_replicates > 100000))
+    err << "bootstrap_replicates = " << bootstrap_replicates << " must be 0 or in [20, 100000]; ";
   std::string s = err.str();
   if (!s.empty()) s.resize(s.size() - 2);
   return s;
@@ -71,6 +76,54 @@ void checkConstrained(const IntrinsicsEstimate& e, double max_relative_sigma) {
           fixed(100.0 * max_relative_sigma, 0) +
           " % of the value): use a stretch where the camera turns about its optical axis and rolls and pitches "
           "between key frames, over relief, or more key frames (--max-frames, --step)");
+}
+
+/// The key-frame bootstrap's covariance of (alpha_u, alpha_v, u0, v0) (see SelfCalibrationConfig); empty if fewer
+/// than half the replicates converged.
+std::optional<Eigen::Matrix4d> keyFrameBootstrapCovariance(const std::vector<PairFundamental>& pairs,
+                                                           const Intrinsics& estimate, const cv::Size& image_size,
+                                                           const SelfCalibrationConfig& config, int* replicates_used) {
+  std::set<int> key_set;
+  for (const PairFundamental& p : pairs) {
+    key_set.insert(p.key_a);
+    key_set.insert(p.key_b);
+  }
+  const std::vector<int> keys(key_set.begin(), key_set.end());
+  MendoncaCipollaConfig start = config.intrinsics;
+  // One start, at the estimate's focal length (the calibrator starts at the image centre with square pixels).
+  start.initial_hfov_deg = 2.0 * std::atan(0.5 * image_size.width / estimate.alpha_u) * 180.0 / M_PI;
+  start.focal_start_factors = {1.0};
+  const MendoncaCipollaCalibrator calibrator(start);
+  std::mt19937_64 rng(config.bootstrap_seed);
+  std::uniform_int_distribution<int> pick(0, static_cast<int>(keys.size()) - 1);
+  std::vector<Eigen::Vector4d> samples;
+  for (int replicate = 0; replicate < config.bootstrap_replicates; ++replicate) {
+    std::map<int, int> multiplicity;
+    for (size_t k = 0; k < keys.size(); ++k) ++multiplicity[keys[pick(rng)]];
+    std::vector<PairFundamental> drawn;
+    for (const PairFundamental& p : pairs) {
+      const auto a = multiplicity.find(p.key_a), b = multiplicity.find(p.key_b);
+      if (a == multiplicity.end() || b == multiplicity.end()) continue;
+      PairFundamental q = p;
+      q.weight *= a->second * b->second;
+      drawn.push_back(q);
+    }
+    try {
+      const IntrinsicsEstimate e = calibrator.calibrate(drawn, image_size);
+      samples.emplace_back(e.value.alpha_u, e.value.alpha_v, e.value.u0, e.value.v0);
+    } catch (const std::exception&) {
+      // Too few pairs drawn, or no admissible solution: a replicate lost, counted below.
+    }
+  }
+  *replicates_used = static_cast<int>(samples.size());
+  if (samples.size() < 10 || 2 * samples.size() < static_cast<size_t>(config.bootstrap_replicates))
+    return std::nullopt;
+  Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+  for (const Eigen::Vector4d& x : samples) mean += x;
+  mean /= static_cast<double>(samples.size());
+  Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
+  for (const Eigen::Vector4d& x : samples) covariance += (x - mean) * (x - mean).transpose();
+  return Eigen::Matrix4d(covariance / static_cast<double>(samples.size() - 1));
 }
 
 }  // namespace
@@ -151,6 +204,7 @@ SelfCalibrationResult selfCalibrate(const std::vector<KeyFramePair>& pairs, cons
     if (result.general_pairs > 0)
       result.notes.push_back(std::to_string(result.general_pairs) +
                              " pairs showed parallax (GRIC) and were left out of the planar calibration");
+    result.residual_sigma = result.intrinsics.sigma;
     checkConstrained(result.intrinsics, config.max_relative_sigma);
     return result;
   }
@@ -190,6 +244,29 @@ SelfCalibrationResult selfCalibrate(const std::vector<KeyFramePair>& pairs, cons
   } catch (const std::runtime_error& e) {
     throw CalibrationImpossible(CalibrationImpossible::Reason::kUnconstrained, e.what());
   }
+  result.residual_sigma = result.intrinsics.sigma;
+  if (config.bootstrap_replicates > 0) {
+    const std::optional<Eigen::Matrix4d> bootstrap = keyFrameBootstrapCovariance(
+        fundamentals, result.intrinsics.value, image_size, config, &result.bootstrap_replicates_used);
+    if (bootstrap) {
+      // Each parameter's 1-sigma: the larger of the two; the correlations: the bootstrap's.
+      IntrinsicsEstimate& e = result.intrinsics;
+      Eigen::Vector4d sigma;
+      for (int i = 0; i < 4; ++i)
+        sigma(i) = std::max(std::sqrt(std::max(0.0, e.covariance(i, i))), std::sqrt(std::max(0.0, (*bootstrap)(i, i))));
+      const Eigen::Vector4d boot_sigma = bootstrap->diagonal().cwiseMax(1e-300).cwiseSqrt();
+      const Eigen::Matrix4d correlation = boot_sigma.cwiseInverse().asDiagonal() * (*bootstrap) *
+                                          boot_sigma.cwiseInverse().asDiagonal();
+      e.covariance = sigma.asDiagonal() * correlation * sigma.asDiagonal();
+      e.sigma = Intrinsics{sigma(0), sigma(1), sigma(2), sigma(3)};
+      result.uncertainty = "key-frame bootstrap";
+    } else {
+      result.notes.push_back("the key-frame bootstrap did not converge in enough replicates (" +
+                             std::to_string(result.bootstrap_replicates_used) + " of " +
+                             std::to_string(config.bootstrap_replicates) +
+                             "): the 1-sigma is the residual-based one, which takes the pairs as independent");
+    }
+  }
   checkConstrained(result.intrinsics, config.max_relative_sigma);
   const Eigen::Matrix3d K = result.intrinsics.value.K();
   for (size_t i = 0; i < pairs.size(); ++i) {
@@ -220,7 +297,9 @@ std::string summaryText(const SelfCalibrationResult& result) {
   out << "  horizontal field of view "
       << fixed(2.0 * std::atan(0.5 * result.image_size.width / e.value.alpha_u) * 180.0 / M_PI, 2)
       << " deg; residual RMS " << std::setprecision(3) << e.residual_rms << "; " << e.starts_converged << " of "
-      << e.starts << " starts converged\n";
+      << e.starts << " starts converged; 1-sigma from " << result.uncertainty
+      << (result.uncertainty == "residuals" ? "" : " (" + std::to_string(result.bootstrap_replicates_used) + " replicates)")
+      << "\n";
   const int assessed = result.planar_pairs + result.general_pairs;
   out << "Planarity: " << (result.scene_planar ? "FLAT seabed" : "relief") << " (" << result.general_pairs << " of "
       << assessed << " assessed pairs show parallax, " << result.planar_pairs
@@ -259,7 +338,8 @@ std::string selfCalibrationYamlBlock(const SelfCalibrationResult& result) {
       << "  planar_pairs: " << result.planar_pairs << "\n"
       << "  general_pairs: " << result.general_pairs << "\n"
       << "  seabed_flat: " << (result.scene_planar ? "true" : "false") << "\n"
-      << "  residual_rms: " << e.residual_rms << "\n";
+      << "  residual_rms: " << e.residual_rms << "\n"
+      << "  sigma_from: \"" << result.uncertainty << "\"\n";
   return out.str();
 }
 

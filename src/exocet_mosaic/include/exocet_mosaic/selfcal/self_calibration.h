@@ -36,6 +36,13 @@ struct SelfCalibrationConfig {
   /// The result is refused as unconstrained if a parameter's 1-sigma exceeds this share of its value (> 0).
   double max_relative_sigma = 0.1;
   bool allow_planar = false;  ///< calibrate a flat seabed from its homographies instead of refusing
+  /// Key-frame bootstrap of the Mendonca-Cipolla estimate (0 = none, else >= 20): the pairs' fundamental matrices
+  /// share their key frames' tracks, so their errors are correlated and the residual-based covariance (which takes
+  /// the pairs as independent) understates the uncertainty. Each replicate draws the key frames with replacement,
+  /// weighs every pair by the product of its two key frames' multiplicities and minimises the cost again from the
+  /// estimate; the reported 1-sigma of each parameter is the larger of the two.
+  int bootstrap_replicates = 200;
+  uint64_t bootstrap_seed = 1;  ///< the resampling's random generator: same seed, same result
   std::string validate() const;
 };
 
@@ -66,6 +73,11 @@ struct SelfCalibrationResult {
   int general_pairs = 0;           ///< pairs with significant parallax (relief)
   bool scene_planar = false;       ///< the verdict: most assessed pairs are planar
   std::vector<std::string> notes;  ///< things the user should know (method switched, weak constraints)
+  /// Where the 1-sigma comes from: "residuals" (the calibrator's covariance) or "key-frame bootstrap" (the larger of
+  /// it and the bootstrap's, Mendonca-Cipolla path).
+  std::string uncertainty = "residuals";
+  int bootstrap_replicates_used = 0;  ///< replicates that converged
+  Intrinsics residual_sigma;          ///< the calibrator's own (residual-based) 1-sigma, for comparison
 };
 
 /// Why a calibration cannot be made (the tool's exit code 3). what() says what to do.
