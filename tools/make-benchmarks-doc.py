@@ -64,9 +64,11 @@ BENCHMARKS = {
                 'gets the start point, the heading and the altitude only. Sparus: `../shared/data/sparus_auv`.',
         'method': [
             'Frames placed: frames with a fused pose composed into the mosaic, over the frames read.',
-            'Landmark distances: the checker targets found in the tiles (template match, then the saddle to a '
-            'fraction of a pixel); the distance between every pair of sightings against the surveyed distance, in '
-            'per cent (median, p95).',
+            'Landmark distances: the checker targets found in the tiles (template match within 0.6 m of the '
+            'surveyed place, then the saddle to a fraction of a pixel; a checker found twice counts once, and it '
+            'is the surveyed spot nearest to it once the tile\'s common offset, the median over its checkers, is '
+            'taken off); the distance between every pair of sightings of two different spots at least 0.5 m '
+            'apart against the surveyed distance, in per cent (median, p95; `_same_tile`: both in one tile).',
             '`cv::Stitcher` SCANS on every 10th frame in a child process abandoned after the time limit '
             '(`stitcher_seconds` null when it did not finish).',
         ],
@@ -286,7 +288,10 @@ BENCHMARKS = {
                 'roll and pitch, 0.5 px image noise (`--runs`, default 50, seeds 1000 onwards). For the fundamental '
                 'matrix, 10 such sequences with 10 % of the observations wrong (about 19 % of the matches). For the '
                 'planar method, 20 flat sequences. End to end: a dive rendered by the simulator over relief, and '
-                'the same dive over a flat seabed.',
+                'the same dive over a flat seabed. Strong relief (`wreck_*`): the first 900 frames (36 s, 90 key '
+                'frames) of `src/exocet_mosaic/config/dives/wreck.yaml` (out and back over amphorae and blocks '
+                '0.2-0.6 m tall at 1.5-3 m, a U-turn, roll and pitch +-3 degrees, lamp offset to starboard); '
+                '`wreck_tilt8_*`: the same with +-8 degrees of roll and pitch (`--wreck-frames N`).',
         'method': [
             'Errors are |estimate - truth| / truth in % for each intrinsic; mean over the runs, and the largest. '
             '`sigma_*_mean_pct` is the mean 1-sigma the calibration reports; `monte_carlo_within_1_sigma_pct` the '
@@ -296,6 +301,15 @@ BENCHMARKS = {
             'noisy inliers, distance to the true F, and time per pair.',
             'A flat seabed must be refused by the default calibration (GRIC prefers a homography): '
             '`flat_refused_fraction`, `e2e_flat_refused`.',
+            'The reported 1-sigma is the larger of the calibrator\'s residual-based one and a key-frame bootstrap '
+            '(200 replicates: key frames drawn with replacement, each pair weighed by its key frames\' '
+            'multiplicities): pairs sharing a key frame share its tracks\' errors.',
+            'Wreck dives: KLT tracks (a key frame every 10 frames), calibrated with the acceptance switched off so '
+            'that the estimate is always measured; `*_z_*` is (estimate - truth) / reported 1-sigma, '
+            '`*_z_residual_*` the same with the residual-based 1-sigma; `*_refused` whether the default acceptance '
+            '(every 1-sigma within 10 % of its value) refuses it. Two controls locate the error: the same cost on '
+            'the exact fundamental matrices of the pairs used (`*_exact_f_err_*_pct`: the motion alone), and the '
+            'RMS Sampson distance of the inlier tracks to the exact epipolar geometry (the tracking).',
         ],
         'targets': ['Mean errors below the 2D3 report\'s Table 1 (`report_err_*_pct`).'],
         'references': ['2D3 report, Table 1 (mean |error| %): alpha_u 2.06, alpha_v 2.06, u0 1.65, v0 1.19.'],
@@ -321,6 +335,16 @@ BENCHMARKS = {
             ('e2e_flat_refused', 'rendered flat dive refused by the default calibration (1 = yes)'),
             ('e2e_flat_planar_err_*_pct', 'rendered flat dive, planar method: |error| (%)'),
             ('e2e_err_*_pct', 'rendered dive over relief: |error| (%)'),
+            ('wreck*_err_*_pct', 'wreck: |error| (%)'),
+            ('wreck*_exact_f_err_*_pct', 'wreck, exact fundamental matrices: |error| (%)'),
+            ('wreck*_sigma_*_px', 'wreck: reported 1-sigma (px)'),
+            ('wreck*_z_residual_*', 'wreck: error / residual-based 1-sigma'),
+            ('wreck*_z_*', 'wreck: error / reported 1-sigma'),
+            ('wreck*_refused', 'wreck: refused by the default acceptance (1 = yes)'),
+            ('wreck*_inlier_sampson_to_true_rms_px', 'wreck: inlier tracks, RMS Sampson distance to the exact F (px)'),
+            ('wreck*_inliers_beyond_1px_pct', 'wreck: inlier tracks beyond 1 px of the exact F (%)'),
+            ('wreck*_pairs_used', 'wreck: key-frame pairs used'),
+            ('wreck*_frames', 'wreck: frames calibrated from'),
         ],
     },
     'tiles.json': {
