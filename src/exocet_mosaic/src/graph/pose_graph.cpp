@@ -3,6 +3,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -120,6 +121,21 @@ double threadCpuSeconds() {
   return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
+void configureSolver(const PoseGraphConfig& config, ceres::Solver::Options* solver_options) {
+  ceres::Solver::Options& options = *solver_options;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.sparse_linear_algebra_library_type =
+      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE : ceres::EIGEN_SPARSE;
+  options.max_num_iterations = config.max_iterations;
+  options.max_solver_time_in_seconds = config.max_solver_time_s;
+  options.num_threads = config.threads;
+  // Tight: a windowed and a full solve of the same data must agree to well below a millimetre.
+  options.function_tolerance = 1e-14;
+  options.gradient_tolerance = 1e-14;
+  options.parameter_tolerance = 1e-12;
+  options.logging_type = ceres::SILENT;
+}
+
 std::string idText(int64_t id) { return std::to_string(id); }
 
 class InterruptCallback : public ceres::IterationCallback {
@@ -164,6 +180,8 @@ std::string PoseGraphConfig::validate() const {
     err << "window_policy = " << static_cast<int>(window_policy) << " not one of kFull, kAffected; ";
   if (window_margin_keyframes < 0)
     err << "window_margin_keyframes = " << window_margin_keyframes << " out of range [0, inf); ";
+  if (loop_margin_keyframes < 0)
+    err << "loop_margin_keyframes = " << loop_margin_keyframes << " out of range [0, inf); ";
   if (!(position_fix_cauchy_scale >= 0.0) || !std::isfinite(position_fix_cauchy_scale))
     err << "position_fix_cauchy_scale = " << position_fix_cauchy_scale << " out of range [0, inf) (0: no loss); ";
   positive("loop_gate_chi2", loop_gate_chi2);
@@ -380,7 +398,7 @@ int PoseGraph::buildProblem(const std::vector<char>& active, bool switches_free,
       } else if (f.type == FactorType::kLoop) {
         double* s = &loops_[f.loop].switch_value;
         problem->AddResidualBlock(f.cost.get(), f.loss, a, keyframes_[f.b].state, s);
-        if (switches_free) {
+        if (switches_free && !loops_[f.loop].held) {
           problem->SetParameterLowerBound(s, 0, 0.0);
           problem->SetParameterUpperBound(s, 0, 1.0);
         } else {
@@ -402,6 +420,83 @@ int PoseGraph::buildProblem(const std::vector<char>& active, bool switches_free,
   return count;
 }
 
+PoseGraph::SolverRun PoseGraph::optimize(const std::vector<char>& active) {
+  SolverRun run;
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  run.factors = buildProblem(active, true, &problem, &run.held);
+  if (run.factors == 0) {
+    run.message = "no factor";
+    return run;
+  }
+  ceres::Solver::Options options;
+  configureSolver(config_, &options);
+  InterruptCallback interrupt(interrupt_check_);
+  if (interrupt_check_) options.callbacks.push_back(&interrupt);
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  run.iterations = static_cast<int>(summary.iterations.size());
+  run.initial_cost = summary.initial_cost;
+  run.final_cost = summary.final_cost;
+  run.converged = summary.termination_type == ceres::CONVERGENCE;
+  run.message = summary.BriefReport();
+  return run;
+}
+
+void PoseGraph::testNewLoops(const std::vector<char>& active, SolveReport* report) {
+  std::vector<int> untested;
+  for (size_t l = 0; l < loops_.size(); ++l)
+    if (!loops_[l].tested && (active[loops_[l].from] || active[loops_[l].to])) untested.push_back(static_cast<int>(l));
+  if (untested.empty()) return;
+  // The graph without them.
+  for (const int l : untested) {
+    loops_[l].switch_value = 0.0;
+    loops_[l].held = true;
+  }
+  optimize(active);
+  const int n = static_cast<int>(keyframes_.size()), margin = config_.loop_margin_keyframes;
+  for (const int l : untested) {
+    Loop& loop = loops_[l];
+    const int lo = std::max(0, std::min(loop.from, loop.to) - margin);
+    const int hi = std::min(n - 1, std::max(loop.from, loop.to) + margin);
+    // Within the solve's window: the test sees the flexibility the solve has.
+    std::vector<char> window(n, 0);
+    for (int k = lo; k <= hi; ++k) window[k] = active[k];
+    std::vector<std::array<double, 3>> saved(hi - lo + 1);
+    for (int k = lo; k <= hi; ++k) std::copy(keyframes_[k].state, keyframes_[k].state + 3, saved[k - lo].begin());
+
+    ceres::Problem::Options problem_options;
+    problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(problem_options);
+    int held = 0;
+    buildProblem(window, true, &problem, &held);
+    double cost_off = 0.0, cost_on = 0.0;
+    problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost_off, nullptr, nullptr, nullptr);
+    loop.switch_value = 1.0;
+    ceres::Solver::Options options;
+    configureSolver(config_, &options);
+    InterruptCallback interrupt(interrupt_check_);
+    if (interrupt_check_) options.callbacks.push_back(&interrupt);
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+    problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost_on, nullptr, nullptr, nullptr);
+    // Costs are half the chi2; the loop's block holds gate / 2 when off (its switch prior) and chi2 / 2 when on.
+    loop.consistency_chi2 = 2.0 * (cost_on - cost_off) + config_.loop_gate_chi2;
+    loop.tested = true;
+    ++report->loops_tested;
+    if (loop.consistency_chi2 <= config_.loop_gate_chi2) {
+      ++report->loops_passed;
+    } else {
+      loop.switch_value = 0.0;
+      for (int k = lo; k <= hi; ++k) std::copy(saved[k - lo].begin(), saved[k - lo].end(), keyframes_[k].state);
+    }
+  }
+  for (const int l : untested) loops_[l].held = false;
+}
+
 SolveReport PoseGraph::solveWindow(const std::vector<char>& active) {
   SolveReport report;
   const double cpu0 = threadCpuSeconds();
@@ -418,40 +513,15 @@ SolveReport PoseGraph::solveWindow(const std::vector<char>& active) {
     std::vector<Eigen::Vector2d> before(free_keyframes.size());
     for (size_t i = 0; i < free_keyframes.size(); ++i)
       before[i] = Eigen::Vector2d(keyframes_[free_keyframes[i]].state[0], keyframes_[free_keyframes[i]].state[1]);
-
-    ceres::Problem::Options problem_options;
-    problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    ceres::Problem problem(problem_options);
-    report.factors = buildProblem(active, true, &problem, &report.keyframes_held);
-
-    ceres::Solver::Options options;
-    options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-    options.sparse_linear_algebra_library_type =
-        ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                              : ceres::EIGEN_SPARSE;
-    options.max_num_iterations = config_.max_iterations;
-    options.max_solver_time_in_seconds = config_.max_solver_time_s;
-    options.num_threads = config_.threads;
-    // Tight: a windowed and a full solve of the same data must agree to well below a millimetre.
-    options.function_tolerance = 1e-14;
-    options.gradient_tolerance = 1e-14;
-    options.parameter_tolerance = 1e-12;
-    options.logging_type = ceres::SILENT;
-    InterruptCallback interrupt(interrupt_check_);
-    if (interrupt_check_) options.callbacks.push_back(&interrupt);
-    ceres::Solver::Summary summary;
-    if (report.factors > 0) {
-      ceres::Solve(options, &problem, &summary);
-      report.iterations = static_cast<int>(summary.iterations.size());
-      report.initial_cost = summary.initial_cost;
-      report.final_cost = summary.final_cost;
-      report.converged = summary.termination_type == ceres::CONVERGENCE;
-      report.message = summary.BriefReport();
-    } else {
-      report.converged = true;
-      report.message = "no factor";
-    }
+    testNewLoops(active, &report);
+    const SolverRun run = optimize(active);
+    report.factors = run.factors;
+    report.keyframes_held = run.held;
+    report.iterations = run.iterations;
+    report.initial_cost = run.initial_cost;
+    report.final_cost = run.final_cost;
+    report.converged = run.converged;
+    report.message = run.message;
     for (size_t i = 0; i < free_keyframes.size(); ++i) {
       double* state = keyframes_[free_keyframes[i]].state;
       state[2] = wrapAngle(state[2]);
@@ -474,8 +544,9 @@ SolveReport PoseGraph::solve() {
   for (const int k : dirty_)
     for (int j = std::max(0, k - margin); j <= std::min(n - 1, k + margin); ++j) active[j] = 1;
   for (const int l : dirty_loops_) {
-    // A loop bends the trajectory between its ends.
-    const int lo = std::min(loops_[l].from, loops_[l].to), hi = std::max(loops_[l].from, loops_[l].to);
+    // A loop bends the trajectory between its ends, and beyond them.
+    const int lo = std::max(0, std::min(loops_[l].from, loops_[l].to) - config_.loop_margin_keyframes);
+    const int hi = std::min(n - 1, std::max(loops_[l].from, loops_[l].to) + config_.loop_margin_keyframes);
     std::fill(active.begin() + lo, active.begin() + hi + 1, 1);
   }
   dirty_.clear();
@@ -546,6 +617,7 @@ LoopStatus PoseGraph::loop(int index) const {
   status.switch_value = l.switch_value;
   status.chi2 = (l.whitening * relativeError(keyframes_[l.from].state, keyframes_[l.to].state, l.measured)).squaredNorm();
   status.accepted = l.switch_value > 0.5;
+  status.consistency_chi2 = l.consistency_chi2;
   return status;
 }
 

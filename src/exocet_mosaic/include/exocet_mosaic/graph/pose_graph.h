@@ -25,10 +25,18 @@
  * leaves a pull of s^2 of its weight (a 1 m error at 2 cm 1-sigma keeps ~1e-5 of it), while a true loop bends the
  * map until its error is small and keeps s near 1.
  *
+ * Switchable constraints alone have a weakness: started at s = 1 far from a true loop (a long drift between its
+ * ends), the optimiser can cut the switch before the map has bent, and stay there (s^2 removes the loop's pull).
+ * Each new loop is therefore first tested for consistency with the graph: its window is solved without it (switch
+ * held at 0), then with it enforced (switch held at 1), over its span widened by loop_margin_keyframes; the increase of the graph's chi2 is the loop's Mahalanobis
+ * error including the map's own uncertainty, chi-square with 3 degrees of freedom for a true loop. The switch
+ * starts at 1 (and the map bent) when that increase is below loop_gate_chi2, at 0 (the map restored) otherwise;
+ * then every switch is optimised jointly with the map, so that later evidence can still turn a loop on or off.
+ *
  * Incremental solving: every factor remembers the key frames it touches; solve() with WindowPolicy::kAffected
  * re-optimises only the key frames touched by factors added since the last solve, widened by
  * window_margin_keyframes on each side, and every key frame between the two ends of a new loop (the span a loop
- * bends). Every factor touching one of them is included; the other key frames it touches are held constant. Each
+ * bends), widened by loop_margin_keyframes. Every factor touching one of them is included; the other key frames it touches are held constant. Each
  * solve is bounded in time (max_solver_time_s) and iterations. solveFull() re-optimises everything.
  */
 #pragma once
@@ -89,6 +97,9 @@ struct PoseGraphConfig {
   };
   WindowPolicy window_policy = WindowPolicy::kAffected;
   int window_margin_keyframes = 10;  ///< key frames added on each side of an affected one, >= 0
+  /// Key frames added on each side of a new loop's span, in the window of the solve and of its consistency test,
+  /// >= 0: the map beyond them is held, so a small margin makes the map stiffer than it is and the test stricter.
+  int loop_margin_keyframes = 100;
   /// Cauchy scale of the position fixes, in whitened units (sigmas), >= 0; 0: plain least squares. 3: a fix within
   /// 3 sigmas keeps at least half its weight, a 10-sigma outlier 8 % of it.
   double position_fix_cauchy_scale = 3.0;
@@ -112,6 +123,8 @@ struct SolveReport {
   int factors = 0;                ///< residual blocks in the problem
   int keyframes_moved = 0;        ///< free key frames whose position changed by more than moved_threshold_m
   double max_move_m = 0.0;        ///< largest change of position of a key frame
+  int loops_tested = 0;           ///< new loops put through the consistency test in this solve
+  int loops_passed = 0;           ///< of which consistent with the graph (switch started at 1)
   int iterations = 0;
   double cpu_s = 0.0;             ///< CPU seconds of the calling thread: building the problem and solving it
   double wall_s = 0.0;
@@ -128,6 +141,10 @@ struct LoopStatus {
   double switch_value = 1.0;  ///< in [0, 1]
   double chi2 = 0.0;          ///< |W e|^2 of the unscaled residual at the current poses
   bool accepted = true;       ///< switch_value > 0.5
+  /// Increase of the graph's chi2 when the loop was enforced (switch 1) in its first solve, against the graph
+  /// without it: the loop's Mahalanobis error including the map's uncertainty. Its switch started at 1 when below
+  /// loop_gate_chi2, at 0 otherwise.
+  double consistency_chi2 = 0.0;
 };
 
 /**
@@ -243,6 +260,16 @@ class PoseGraph {
     Eigen::Vector3d measured;
     Eigen::Matrix3d whitening;
     double switch_value = 1.0;  ///< the Ceres parameter block of the switch
+    bool held = false;          ///< switch held constant (while testing new loops)
+    bool tested = false;
+    double consistency_chi2 = 0.0;
+  };
+  struct SolverRun {
+    int iterations = 0;
+    double initial_cost = 0.0, final_cost = 0.0;
+    bool converged = true;
+    std::string message;
+    int factors = 0, held = 0;
   };
   struct PendingFix {
     double stamp_s;
@@ -256,6 +283,10 @@ class PoseGraph {
   void attachFix(const PendingFix& fix, int a, int b, double weight_b);
   void markDirty(int index);
   SolveReport solveWindow(const std::vector<char>& active);
+  /// Solves over the `active` key frames (switches free unless held).
+  SolverRun optimize(const std::vector<char>& active);
+  /// The consistency test of the untested loops touching `active` (see the file comment); sets their switches.
+  void testNewLoops(const std::vector<char>& active, SolveReport* report);
   /// Adds the factors touching `active` key frames to `problem`; returns how many.
   int buildProblem(const std::vector<char>& active, bool switches_free, ceres::Problem* problem, int* held);
 
