@@ -61,8 +61,7 @@ TEST(PoseGraph, WrapAngleIsHalfOpenInterval) {
 // A unit square driven counter-clockwise with exact odometry and a closing loop, started from perturbed poses:
 // the solution is the square, held at the first key frame by the gauge prior.
 TEST(PoseGraph, SquareWithLoopConvergesToExactSquare) {
-  const std::vector<Pose2d> truth = {poseOf(0, 0, 0), poseOf(1, 0, kPi / 2), poseOf(1, 1, kPi),
-                                     poseOf(0, 1, -kPi / 2)};
+  const std::vector<Pose2d> truth = {poseOf(0, 0, 0), poseOf(1, 0, kPi / 2), poseOf(1, 1, kPi), poseOf(0, 1, -kPi / 2)};
   PoseGraphConfig config;
   config.window_policy = PoseGraphConfig::WindowPolicy::kFull;
   PoseGraph g(config);
@@ -165,8 +164,7 @@ struct OutAndBack {
       if (k > 0) p = compose(p, odometry[k - 1]);
       g->addKeyFrame(static_cast<int64_t>(k), 0.4 * k, p);
     }
-    for (size_t k = 0; k + 1 < truth.size(); ++k)
-      g->addOdometry(k, k + 1, odometry[k], diag3(sigma_m, sigma_rad));
+    for (size_t k = 0; k + 1 < truth.size(); ++k) g->addOdometry(k, k + 1, odometry[k], diag3(sigma_m, sigma_rad));
     if (with_headings)
       for (size_t k = 0; k < truth.size(); ++k) g->addHeading(k, headings_rad[k], heading_sigma_rad);
   }
@@ -221,11 +219,12 @@ TEST_P(LoopRejection, FalseLoopRejectedTrueLoopAccepted) {
   EXPECT_EQ(report.loops_accepted, 3);
   EXPECT_EQ(report.loops_rejected, 1);
   double bend_m = 0.0;
-  for (int k = 0; k < n; ++k) bend_m = std::max(bend_m, (g.pose(k).position_en_m - with_true.pose(k).position_en_m).norm());
+  for (int k = 0; k < n; ++k)
+    bend_m = std::max(bend_m, (g.pose(k).position_en_m - with_true.pose(k).position_en_m).norm());
   const double error_m = run.maxError(g);
-  std::cout << "out-and-back" << (with_headings ? " with headings" : "") << ": drift without loops " << drift_m << " m, with loops " << error_m
-            << " m, false loop bends the map by " << bend_m << " m (switch " << g.loop(false_loop).switch_value
-            << ")\n";
+  std::cout << "out-and-back" << (with_headings ? " with headings" : "") << ": drift without loops " << drift_m
+            << " m, with loops " << error_m << " m, false loop bends the map by " << bend_m << " m (switch "
+            << g.loop(false_loop).switch_value << ")\n";
   EXPECT_LT(bend_m, 0.02);
   EXPECT_LT(error_m, 0.5 * drift_m);
   // With headings the map is within the along-track random walk of the odometry (1 cm per step) of the truth.
@@ -383,7 +382,7 @@ TEST(PoseGraph, BadInputIsRejectedWithItsReason) {
   expectInvalid([&] { background.addOdometry(5, 6, d, good); }, "unknown key frame id 6");
   expectInvalid([&] { background.addLoop(4, 5, d, good); }, "unknown key frame id 4");
   expectInvalid([&] { background.addHeading(5, 0.0, -1.0); }, "sigma_rad");
-  expectInvalid([&] { background.addPositionFix(1.0, Eigen::Vector2d(0, 0), diag2(0) ); }, "not positive definite");
+  expectInvalid([&] { background.addPositionFix(1.0, Eigen::Vector2d(0, 0), diag2(0)); }, "not positive definite");
   expectInvalid([&] { background.addKeyFrame(5, 2.0, poseOf(0, 0, 0)); }, "not greater");
   EXPECT_TRUE(background.waitIdle(10.0));
   EXPECT_EQ(background.snapshot()->last_error, "");
@@ -426,7 +425,8 @@ struct SurveyInputs {
       }
       s.initial = chained;
       s.heading_rad = truth[i].yaw_rad + 0.017 * normal(rng);
-      if (i % 5 == 2) s.fixes.push_back({s.stamp_s - 0.2, truth[i].position_en_m + 0.5 * Eigen::Vector2d(normal(rng), normal(rng))});
+      if (i % 5 == 2)
+        s.fixes.push_back({s.stamp_s - 0.2, truth[i].position_en_m + 0.5 * Eigen::Vector2d(normal(rng), normal(rng))});
       const int lane = static_cast<int>(i) / per_lane, k = static_cast<int>(i) % per_lane;
       if (lane > 0 && k % 25 == 12) {
         const int j = (lane - 1) * per_lane + (per_lane - 1 - k);  // same east on the lane before

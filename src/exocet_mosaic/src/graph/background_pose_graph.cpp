@@ -64,9 +64,8 @@ void BackgroundPoseGraph::addKeyFrame(int64_t id, double stamp_s, const Pose2d& 
       throw std::invalid_argument("addKeyFrame: id " + std::to_string(id) + " not greater than the last id " +
                                   std::to_string(queued_ids_.back()));
     if (!queued_ids_.empty() && !(stamp_s > last_stamp_s_))
-      throw std::invalid_argument("addKeyFrame: key frame " + std::to_string(id) + " stamp " +
-                                  std::to_string(stamp_s) + " s not after the last stamp " +
-                                  std::to_string(last_stamp_s_) + " s");
+      throw std::invalid_argument("addKeyFrame: key frame " + std::to_string(id) + " stamp " + std::to_string(stamp_s) +
+                                  " s not after the last stamp " + std::to_string(last_stamp_s_) + " s");
     queued_ids_.push_back(id);
     last_stamp_s_ = stamp_s;
     push(KeyFrameInput{id, stamp_s, initial_pose});

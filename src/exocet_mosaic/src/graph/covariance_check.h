@@ -37,10 +37,10 @@ Eigen::Matrix<double, N, N> whiteningOf(const Eigen::Matrix<double, N, N>& covar
     throw std::invalid_argument(err.str());
   }
   const Eigen::Matrix<double, N, N> symmetric = 0.5 * (covariance + covariance.transpose());
-  const double min_eigenvalue = Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>>(symmetric,
-                                                                                          Eigen::EigenvaluesOnly)
-                                    .eigenvalues()
-                                    .minCoeff();
+  const double min_eigenvalue =
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>>(symmetric, Eigen::EigenvaluesOnly)
+          .eigenvalues()
+          .minCoeff();
   Eigen::LLT<Eigen::Matrix<double, N, N>> llt(symmetric);
   if (!(min_eigenvalue > 0.0) || llt.info() != Eigen::Success) {
     err << what << " is not positive definite (smallest eigenvalue " << min_eigenvalue << "):\n" << covariance;

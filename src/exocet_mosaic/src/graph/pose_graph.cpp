@@ -200,15 +200,16 @@ std::string PoseGraphConfig::validate() const {
 PoseGraph::PoseGraph(const PoseGraphConfig& config) : config_(config) {
   const std::string problem = config_.validate();
   if (!problem.empty()) throw std::invalid_argument("PoseGraphConfig: " + problem);
-  if (config_.position_fix_cauchy_scale > 0.0) fix_loss_ = std::make_unique<ceres::CauchyLoss>(config_.position_fix_cauchy_scale);
+  if (config_.position_fix_cauchy_scale > 0.0)
+    fix_loss_ = std::make_unique<ceres::CauchyLoss>(config_.position_fix_cauchy_scale);
 }
 
 PoseGraph::~PoseGraph() = default;
 
 int PoseGraph::indexOf(int64_t id) const {
   // Ids strictly increase: the deque is sorted.
-  const auto it = std::lower_bound(keyframes_.begin(), keyframes_.end(), id,
-                                   [](const KeyFrame& k, int64_t v) { return k.id < v; });
+  const auto it =
+      std::lower_bound(keyframes_.begin(), keyframes_.end(), id, [](const KeyFrame& k, int64_t v) { return k.id < v; });
   if (it == keyframes_.end() || it->id != id) return -1;
   return static_cast<int>(it - keyframes_.begin());
 }
@@ -530,7 +531,8 @@ SolveReport PoseGraph::solveWindow(const std::vector<char>& active) {
       if (move > config_.moved_threshold_m) ++report.keyframes_moved;
     }
   }
-  for (size_t i = 0; i < loops_.size(); ++i) (loops_[i].switch_value > 0.5 ? report.loops_accepted : report.loops_rejected)++;
+  for (size_t i = 0; i < loops_.size(); ++i)
+    (loops_[i].switch_value > 0.5 ? report.loops_accepted : report.loops_rejected)++;
   report.cpu_s = threadCpuSeconds() - cpu0;
   report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   return report;
@@ -615,7 +617,8 @@ LoopStatus PoseGraph::loop(int index) const {
   status.from_id = keyframes_[l.from].id;
   status.to_id = keyframes_[l.to].id;
   status.switch_value = l.switch_value;
-  status.chi2 = (l.whitening * relativeError(keyframes_[l.from].state, keyframes_[l.to].state, l.measured)).squaredNorm();
+  status.chi2 =
+      (l.whitening * relativeError(keyframes_[l.from].state, keyframes_[l.to].state, l.measured)).squaredNorm();
   status.accepted = l.switch_value > 0.5;
   status.consistency_chi2 = l.consistency_chi2;
   return status;
@@ -635,8 +638,7 @@ std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
   if (!problem.HasParameterBlock(block)) return std::nullopt;
   ceres::Covariance::Options options;
   options.sparse_linear_algebra_library_type =
-      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE
-                                                                            : ceres::EIGEN_SPARSE;
+      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE : ceres::EIGEN_SPARSE;
   ceres::Covariance covariance(options);
   if (!covariance.Compute({std::make_pair(block, block)}, &problem)) return std::nullopt;
   Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c;

@@ -31,22 +31,22 @@ namespace graph {
 
 /// The solution after one solve of the worker; never changed once published.
 struct GraphSnapshot {
-  uint64_t sequence = 0;           ///< 1, 2, ... in publication order
-  uint64_t inputs_applied = 0;     ///< add* calls applied to the graph (accepted ones)
-  bool settled = false;            ///< the last solve was a converged full solve over every input applied
+  uint64_t sequence = 0;                 ///< 1, 2, ... in publication order
+  uint64_t inputs_applied = 0;           ///< add* calls applied to the graph (accepted ones)
+  bool settled = false;                  ///< the last solve was a converged full solve over every input applied
   std::vector<KeyFramePose> key_frames;  ///< increasing ids
   std::vector<char> loop_accepted;       ///< per loop index
-  SolveReport report;              ///< of the solve that made this snapshot
-  std::string last_error;          ///< the last input the worker could not apply ("" normally)
+  SolveReport report;                    ///< of the solve that made this snapshot
+  std::string last_error;                ///< the last input the worker could not apply ("" normally)
   /// The key frame `id`, nullptr when not in the snapshot.
   const KeyFramePose* find(int64_t id) const;
 };
 
 struct BackgroundPoseGraphConfig {
   PoseGraphConfig graph;
-  double idle_wait_s = 0.05;          ///< longest sleep of the worker between checks, seconds, > 0
-  bool settle_with_full_solve = true; ///< full solve when the queue runs dry after windowed solves
-  std::string validate() const;       ///< "" or each bad field with its allowed range
+  double idle_wait_s = 0.05;           ///< longest sleep of the worker between checks, seconds, > 0
+  bool settle_with_full_solve = true;  ///< full solve when the queue runs dry after windowed solves
+  std::string validate() const;        ///< "" or each bad field with its allowed range
 };
 
 /**
@@ -116,7 +116,7 @@ class BackgroundPoseGraph {
   };
   using Input = std::variant<KeyFrameInput, OdometryInput, FixInput, HeadingInput, LoopInput>;
 
-  void push(Input input);  ///< under mutex_
+  void push(Input input);          ///< under mutex_
   bool knownId(int64_t id) const;  ///< under mutex_
   void run();
   void publish(const SolveReport& report, bool settled);
@@ -139,9 +139,9 @@ class BackgroundPoseGraph {
   std::atomic<bool> stop_flag_{false};
 
   std::shared_ptr<const GraphSnapshot> snapshot_;  ///< std::atomic_load / std::atomic_store only
-  uint64_t sequence_ = 0;  ///< the worker's
-  uint64_t applied_ = 0;   ///< the worker's
-  std::string last_error_;  ///< the worker's
+  uint64_t sequence_ = 0;                          ///< the worker's
+  uint64_t applied_ = 0;                           ///< the worker's
+  std::string last_error_;                         ///< the worker's
   std::thread worker_;
 };
 

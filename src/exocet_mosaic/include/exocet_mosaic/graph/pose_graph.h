@@ -28,16 +28,18 @@
  * Switchable constraints alone have a weakness: started at s = 1 far from a true loop (a long drift between its
  * ends), the optimiser can cut the switch before the map has bent, and stay there (s^2 removes the loop's pull).
  * Each new loop is therefore first tested for consistency with the graph: its window is solved without it (switch
- * held at 0), then with it enforced (switch held at 1), over its span widened by loop_margin_keyframes; the increase of the graph's chi2 is the loop's Mahalanobis
- * error including the map's own uncertainty, chi-square with 3 degrees of freedom for a true loop. The switch
- * starts at 1 (and the map bent) when that increase is below loop_gate_chi2, at 0 (the map restored) otherwise;
- * then every switch is optimised jointly with the map, so that later evidence can still turn a loop on or off.
+ * held at 0), then with it enforced (switch held at 1), over its span widened by loop_margin_keyframes; the increase of
+ * the graph's chi2 is the loop's Mahalanobis error including the map's own uncertainty, chi-square with 3 degrees of
+ * freedom for a true loop. The switch starts at 1 (and the map bent) when that increase is below loop_gate_chi2, at 0
+ * (the map restored) otherwise; then every switch is optimised jointly with the map, so that later evidence can still
+ * turn a loop on or off.
  *
  * Incremental solving: every factor remembers the key frames it touches; solve() with WindowPolicy::kAffected
  * re-optimises only the key frames touched by factors added since the last solve, widened by
  * window_margin_keyframes on each side, and every key frame between the two ends of a new loop (the span a loop
- * bends), widened by loop_margin_keyframes. Every factor touching one of them is included; the other key frames it touches are held constant. Each
- * solve is bounded in time (max_solver_time_s) and iterations. solveFull() re-optimises everything.
+ * bends), widened by loop_margin_keyframes. Every factor touching one of them is included; the other key frames it
+ * touches are held constant. Each solve is bounded in time (max_solver_time_s) and iterations. solveFull() re-optimises
+ * everything.
  */
 #pragma once
 
@@ -117,22 +119,22 @@ struct PoseGraphConfig {
 
 /// What one solve did.
 struct SolveReport {
-  bool full = false;              ///< every key frame was free (solveFull, or the window covered the graph)
-  int keyframes_optimized = 0;    ///< free key frames
-  int keyframes_held = 0;         ///< key frames outside the window held constant by the factors included
-  int factors = 0;                ///< residual blocks in the problem
-  int keyframes_moved = 0;        ///< free key frames whose position changed by more than moved_threshold_m
-  double max_move_m = 0.0;        ///< largest change of position of a key frame
-  int loops_tested = 0;           ///< new loops put through the consistency test in this solve
-  int loops_passed = 0;           ///< of which consistent with the graph (switch started at 1)
+  bool full = false;            ///< every key frame was free (solveFull, or the window covered the graph)
+  int keyframes_optimized = 0;  ///< free key frames
+  int keyframes_held = 0;       ///< key frames outside the window held constant by the factors included
+  int factors = 0;              ///< residual blocks in the problem
+  int keyframes_moved = 0;      ///< free key frames whose position changed by more than moved_threshold_m
+  double max_move_m = 0.0;      ///< largest change of position of a key frame
+  int loops_tested = 0;         ///< new loops put through the consistency test in this solve
+  int loops_passed = 0;         ///< of which consistent with the graph (switch started at 1)
   int iterations = 0;
-  double cpu_s = 0.0;             ///< CPU seconds of the calling thread: building the problem and solving it
+  double cpu_s = 0.0;  ///< CPU seconds of the calling thread: the new loops' tests, building and solving
   double wall_s = 0.0;
   double initial_cost = 0.0, final_cost = 0.0;
-  bool converged = false;         ///< Ceres reached a tolerance (not the time or iteration bound)
-  int loops_accepted = 0;         ///< over the whole graph, after the solve
+  bool converged = false;  ///< Ceres reached a tolerance (not the time or iteration bound)
+  int loops_accepted = 0;  ///< over the whole graph, after the solve
   int loops_rejected = 0;
-  std::string message;            ///< Ceres' brief report, or why nothing was solved
+  std::string message;  ///< Ceres' brief report, or why nothing was solved
 };
 
 /// A loop closure after the last solve that included it.
@@ -200,7 +202,8 @@ class PoseGraph {
   /// Re-optimises every key frame.
   SolveReport solveFull();
   /// Re-optimises the key frames `ids` (each widened by window_margin_keyframes); the others are held constant.
-  /// Factors added since the last solve stay pending for the next solve(). @throws std::invalid_argument on an
+  /// Factors added since the last solve stay pending for the next solve() (new
+  /// loops touching these key frames are tested here already). @throws std::invalid_argument on an
   /// unknown id
   SolveReport solveAround(const std::vector<int64_t>& ids);
 
@@ -293,14 +296,14 @@ class PoseGraph {
   PoseGraphConfig config_;
   std::unique_ptr<ceres::LossFunction> fix_loss_;
   Eigen::Vector2d origin_en_m_ = Eigen::Vector2d::Zero();  ///< first key frame's initial position
-  std::deque<KeyFrame> keyframes_;  ///< a deque: the parameter blocks must not move
+  std::deque<KeyFrame> keyframes_;                         ///< a deque: the parameter blocks must not move
   std::deque<Loop> loops_;
   std::vector<Factor> factors_;
   std::vector<PendingFix> pending_fixes_;
   size_t fixes_attached_ = 0;
   int gauge_factor_ = -1;
-  std::vector<int> dirty_;        ///< key frames touched by factors added since the last solve
-  std::vector<int> dirty_loops_;  ///< loops added since the last solve
+  std::vector<int> dirty_;             ///< key frames touched by factors added since the last solve
+  std::vector<int> dirty_loops_;       ///< loops added since the last solve
   std::vector<unsigned> factor_mark_;  ///< scratch: the build that last included each factor
   unsigned build_count_ = 0;
   std::function<bool()> interrupt_check_;
