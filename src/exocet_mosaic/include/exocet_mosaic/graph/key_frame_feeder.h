@@ -1,0 +1,111 @@
+/**
+ * @file key_frame_feeder.h
+ * @brief The pose graph's inputs from the fusion's: key frames chosen along the image chain, odometry factors summed
+ * from the metric image motions between them, position fixes and headings at their stamps. No ROS in it.
+ *
+ * Why a stage of the fusion: the graph's odometry is the registration chain converted to metres, and that conversion
+ * (attitude, camera height, lever arms, the images' yaw) is what FusionFrontEnd already does for the filter; the
+ * fixes reach the graph as the fusion received them, moved to the camera by the same mounts. Feeding the graph from
+ * the front-end's outcomes keeps one copy of that plumbing. Loops come from a component that holds key-frame images.
+ *
+ * Key frames: the first image the feeder is started at, then an image whenever the camera moved keyframe_distance_m
+ * since the last key frame or keyframe_max_interval_s passed. Between two key frames A and B the image motions are
+ * summed: the displacement (world east/north) turned into A's axes by A's yaw, its covariance turned likewise (the
+ * images' covariances add: each pair's registration error is independent), plus a floor per key frame for what the
+ * metric conversion leaves out (the seabed's relief under the images); the yaw change is the sum of the images' yaw
+ * changes with image_yaw_sigma_rad per pair. A registration failure leaves no odometry across it: the next image
+ * starts a key frame tied to the last one by a weak odometry (gap_sigma_m, gap_yaw_sigma_rad) from the fused
+ * positions, so that the graph stays connected and the fixes decide where it lies.
+ */
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "exocet_mosaic/graph/background_pose_graph.h"
+
+namespace exocet_mosaic {
+namespace graph {
+
+/// Settings. validate() names a bad field and its allowed range.
+struct KeyFrameFeederConfig {
+  double keyframe_distance_m = 0.3;       ///< camera displacement that makes a key frame (0, 100] m
+  double keyframe_max_interval_s = 2.0;   ///< or the time since the last key frame (0, 3600] s
+  double image_yaw_sigma_rad = 0.002;     ///< 1-sigma of one image pair's yaw change (0, 1] rad
+  double odometry_floor_m = 0.002;        ///< 1-sigma added to each key-frame odometry, per axis [0, 10] m
+  double gap_sigma_m = 1.0;               ///< 1-sigma of the odometry across a registration failure (0, 1000] m
+  double gap_yaw_sigma_rad = 0.2;         ///< and of its yaw (0, 10] rad
+  std::string validate() const;
+};
+
+/// A key frame as the feeder made it.
+struct FeederKeyFrame {
+  int64_t id = 0;
+  double stamp_s = 0.0;
+  Pose2d initial;  ///< the chain's estimate when it was made
+};
+
+/**
+ * @brief Feeds a BackgroundPoseGraph (never waits for it). Inputs in stamp order; not thread-safe (one caller: the
+ * fusion's thread).
+ */
+class KeyFrameFeeder {
+ public:
+  /// @throws std::invalid_argument with config.validate()'s message, or for a null graph.
+  KeyFrameFeeder(const KeyFrameFeederConfig& config, BackgroundPoseGraph* graph);
+
+  /// The first key frame: the camera at `camera_en_m` with yaw `yaw_rad` (ENU, rad) at `stamp_s`.
+  /// @throws std::invalid_argument for non-finite values
+  int64_t start(double stamp_s, const Eigen::Vector2d& camera_en_m, double yaw_rad);
+  bool started() const { return !key_frames_.empty(); }
+
+  /**
+   * @brief One image pair's motion, to the image at `stamp_s`: the camera's displacement (world east, north, m) and
+   * its covariance (m^2), and the yaw change read from the images (rad, ENU).
+   * @param sensor_yaw_rad the attitude sensor's yaw at `stamp_s` (ENU, rad) with its 1-sigma, when there is one: it
+   * becomes a heading factor if this image becomes a key frame
+   * @return the id of the key frame this image became, if it did
+   * @throws std::invalid_argument before start() or for non-finite values or a covariance that is not positive
+   * semi-definite
+   */
+  std::optional<int64_t> addImageMotion(double stamp_s, const Eigen::Vector2d& displacement_en_m,
+                                        const Eigen::Matrix2d& covariance_m2, double yaw_change_rad,
+                                        std::optional<double> sensor_yaw_rad = std::nullopt,
+                                        double sensor_yaw_sigma_rad = 0.02);
+
+  /**
+   * @brief A pair the registration could not measure, ending at `stamp_s`, where the fusion put the camera at
+   * `fused_en_m` with yaw `fused_yaw_rad`: the next key frame is made here, tied by the gap's weak odometry.
+   * @return the id of that key frame
+   */
+  int64_t addImageFailure(double stamp_s, const Eigen::Vector2d& fused_en_m, double fused_yaw_rad);
+
+  /// A position fix of the camera (USBL moved to the camera), at its measurement time.
+  void addPositionFix(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+
+  const std::vector<FeederKeyFrame>& keyFrames() const { return key_frames_; }
+  /// The chain's current camera position and yaw (the last key frame's plus the motions since).
+  Pose2d chainPose() const;
+  const KeyFrameFeederConfig& config() const { return config_; }
+
+ private:
+  int64_t makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odometry_covariance,
+                       std::optional<double> sensor_yaw_rad, double sensor_yaw_sigma_rad);
+
+  KeyFrameFeederConfig config_;
+  BackgroundPoseGraph* graph_;
+  std::vector<FeederKeyFrame> key_frames_;
+  // Motion since the last key frame: world displacement and its covariance, yaw change, pairs summed.
+  Eigen::Vector2d displacement_en_m_ = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d covariance_m2_ = Eigen::Matrix2d::Zero();
+  double yaw_change_rad_ = 0.0;
+  int pairs_ = 0;
+  double last_stamp_s_ = 0.0;
+};
+
+}  // namespace graph
+}  // namespace exocet_mosaic

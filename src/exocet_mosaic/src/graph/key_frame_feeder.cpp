@@ -1,0 +1,143 @@
+#include "exocet_mosaic/graph/key_frame_feeder.h"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include <Eigen/Eigenvalues>
+
+namespace exocet_mosaic {
+namespace graph {
+
+namespace {
+
+Eigen::Matrix2d rotation(double angle_rad) {
+  Eigen::Matrix2d r;
+  r << std::cos(angle_rad), -std::sin(angle_rad), std::sin(angle_rad), std::cos(angle_rad);
+  return r;
+}
+
+void requireFinite(bool finite, const char* what) {
+  if (!finite) throw std::invalid_argument(std::string("key-frame feeder: ") + what + " is not finite");
+}
+
+}  // namespace
+
+std::string KeyFrameFeederConfig::validate() const {
+  std::ostringstream e;
+  if (!(keyframe_distance_m > 0.0 && keyframe_distance_m <= 100.0))
+    e << "keyframe_distance_m = " << keyframe_distance_m << " outside (0, 100] m; ";
+  if (!(keyframe_max_interval_s > 0.0 && keyframe_max_interval_s <= 3600.0))
+    e << "keyframe_max_interval_s = " << keyframe_max_interval_s << " outside (0, 3600] s; ";
+  if (!(image_yaw_sigma_rad > 0.0 && image_yaw_sigma_rad <= 1.0))
+    e << "image_yaw_sigma_rad = " << image_yaw_sigma_rad << " outside (0, 1] rad; ";
+  if (!(odometry_floor_m >= 0.0 && odometry_floor_m <= 10.0))
+    e << "odometry_floor_m = " << odometry_floor_m << " outside [0, 10] m; ";
+  if (!(gap_sigma_m > 0.0 && gap_sigma_m <= 1000.0)) e << "gap_sigma_m = " << gap_sigma_m << " outside (0, 1000] m; ";
+  if (!(gap_yaw_sigma_rad > 0.0 && gap_yaw_sigma_rad <= 10.0))
+    e << "gap_yaw_sigma_rad = " << gap_yaw_sigma_rad << " outside (0, 10] rad; ";
+  std::string text = e.str();
+  if (text.size() >= 2) text.resize(text.size() - 2);
+  return text;
+}
+
+KeyFrameFeeder::KeyFrameFeeder(const KeyFrameFeederConfig& config, BackgroundPoseGraph* graph)
+    : config_(config), graph_(graph) {
+  const std::string error = config_.validate();
+  if (!error.empty()) throw std::invalid_argument("key-frame feeder: " + error);
+  if (!graph_) throw std::invalid_argument("key-frame feeder: no pose graph given");
+}
+
+int64_t KeyFrameFeeder::start(double stamp_s, const Eigen::Vector2d& camera_en_m, double yaw_rad) {
+  requireFinite(std::isfinite(stamp_s) && camera_en_m.allFinite() && std::isfinite(yaw_rad), "the start");
+  if (started()) throw std::invalid_argument("key-frame feeder: start() called twice");
+  FeederKeyFrame k;
+  k.id = 0;
+  k.stamp_s = stamp_s;
+  k.initial.position_en_m = camera_en_m;
+  k.initial.yaw_rad = yaw_rad;
+  graph_->addKeyFrame(k.id, k.stamp_s, k.initial);
+  key_frames_.push_back(k);
+  last_stamp_s_ = stamp_s;
+  return k.id;
+}
+
+Pose2d KeyFrameFeeder::chainPose() const {
+  if (key_frames_.empty()) return Pose2d();
+  Pose2d p = key_frames_.back().initial;
+  p.position_en_m += displacement_en_m_;
+  p.yaw_rad = wrapAngle(p.yaw_rad + yaw_change_rad_);
+  return p;
+}
+
+std::optional<int64_t> KeyFrameFeeder::addImageMotion(double stamp_s, const Eigen::Vector2d& displacement_en_m,
+                                                      const Eigen::Matrix2d& covariance_m2, double yaw_change_rad,
+                                                      std::optional<double> sensor_yaw_rad,
+                                                      double sensor_yaw_sigma_rad) {
+  if (!started()) throw std::invalid_argument("key-frame feeder: an image motion before start()");
+  requireFinite(std::isfinite(stamp_s) && displacement_en_m.allFinite() && covariance_m2.allFinite() &&
+                    std::isfinite(yaw_change_rad) && (!sensor_yaw_rad || std::isfinite(*sensor_yaw_rad)),
+                "an image motion");
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(0.5 * (covariance_m2 + covariance_m2.transpose()));
+  if (eigen.eigenvalues().minCoeff() < -1e-12)
+    throw std::invalid_argument("key-frame feeder: an image motion's covariance is not positive semi-definite");
+  displacement_en_m_ += displacement_en_m;
+  covariance_m2_ += 0.5 * (covariance_m2 + covariance_m2.transpose());
+  yaw_change_rad_ += yaw_change_rad;
+  ++pairs_;
+  const bool far = displacement_en_m_.norm() >= config_.keyframe_distance_m;
+  const bool late = stamp_s - key_frames_.back().stamp_s >= config_.keyframe_max_interval_s;
+  last_stamp_s_ = stamp_s;
+  if (!far && !late) return std::nullopt;
+  // Odometry in the earlier key frame's axes: p_B - p_A turned by -yaw_A.
+  const Eigen::Matrix2d to_a = rotation(-key_frames_.back().initial.yaw_rad);
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  covariance.topLeftCorner<2, 2>() = to_a * covariance_m2_ * to_a.transpose() +
+                                     Eigen::Matrix2d::Identity() * config_.odometry_floor_m * config_.odometry_floor_m;
+  covariance(2, 2) = pairs_ * config_.image_yaw_sigma_rad * config_.image_yaw_sigma_rad;
+  return makeKeyFrame(stamp_s, covariance, sensor_yaw_rad, sensor_yaw_sigma_rad);
+}
+
+int64_t KeyFrameFeeder::makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odometry_covariance,
+                                     std::optional<double> sensor_yaw_rad, double sensor_yaw_sigma_rad) {
+  const FeederKeyFrame& a = key_frames_.back();
+  FeederKeyFrame b;
+  b.id = a.id + 1;
+  b.stamp_s = stamp_s;
+  b.initial = chainPose();
+  RelativePose2d delta;
+  delta.translation_m = rotation(-a.initial.yaw_rad) * displacement_en_m_;
+  delta.yaw_rad = wrapAngle(yaw_change_rad_);
+  graph_->addKeyFrame(b.id, b.stamp_s, b.initial);
+  graph_->addOdometry(a.id, b.id, delta, odometry_covariance);
+  if (sensor_yaw_rad && sensor_yaw_sigma_rad > 0.0) graph_->addHeading(b.id, *sensor_yaw_rad, sensor_yaw_sigma_rad);
+  key_frames_.push_back(b);
+  displacement_en_m_.setZero();
+  covariance_m2_.setZero();
+  yaw_change_rad_ = 0.0;
+  pairs_ = 0;
+  return b.id;
+}
+
+int64_t KeyFrameFeeder::addImageFailure(double stamp_s, const Eigen::Vector2d& fused_en_m, double fused_yaw_rad) {
+  if (!started()) throw std::invalid_argument("key-frame feeder: an image failure before start()");
+  requireFinite(std::isfinite(stamp_s) && fused_en_m.allFinite() && std::isfinite(fused_yaw_rad), "an image failure");
+  // Across the gap the chain knows nothing: the fused position stands in, loosely.
+  displacement_en_m_ = fused_en_m - key_frames_.back().initial.position_en_m;
+  yaw_change_rad_ = wrapAngle(fused_yaw_rad - key_frames_.back().initial.yaw_rad);
+  pairs_ = 0;
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  covariance(0, 0) = covariance(1, 1) = config_.gap_sigma_m * config_.gap_sigma_m;
+  covariance(2, 2) = config_.gap_yaw_sigma_rad * config_.gap_yaw_sigma_rad;
+  last_stamp_s_ = stamp_s;
+  return makeKeyFrame(stamp_s, covariance, std::nullopt, 0.0);
+}
+
+void KeyFrameFeeder::addPositionFix(double stamp_s, const Eigen::Vector2d& camera_en_m,
+                                    const Eigen::Matrix2d& covariance_m2) {
+  requireFinite(std::isfinite(stamp_s) && camera_en_m.allFinite() && covariance_m2.allFinite(), "a position fix");
+  graph_->addPositionFix(stamp_s, camera_en_m, covariance_m2);
+}
+
+}  // namespace graph
+}  // namespace exocet_mosaic
