@@ -64,6 +64,8 @@ class FusionReplayTest(unittest.TestCase):
         rospy.Subscriber('/mosaic/path_smoothed', Path, smoothed.append, queue_size=2)
         navigation = []
         rospy.Subscriber('/mosaic/path_navigation', Path, navigation.append, queue_size=2)
+        graph = []
+        rospy.Subscriber('/mosaic/path_graph', Path, graph.append, queue_size=2)
         map_origin = []
 
         def on_tf(msg):
@@ -93,6 +95,12 @@ class FusionReplayTest(unittest.TestCase):
         while time.time() < deadline and not smoothed:
             time.sleep(0.1)
         self.assertTrue(smoothed, 'the smoothed path is published')
+        # The graph's worker settles after the last input; its path is republished at ~path_rate_hz.
+        graph_seen = len(graph)
+        deadline = time.time() + 10.0
+        while time.time() < deadline and len(graph) < graph_seen + 3:
+            time.sleep(0.1)
+        self.assertTrue(graph, 'the pose graph path is published (~pose_graph)')
 
         # One fused position per image pair (image stamps), each against the truth.
         self.assertGreaterEqual(len(odometry), 0.95 * (len(images) - 1))
@@ -117,6 +125,7 @@ class FusionReplayTest(unittest.TestCase):
                     e.append(np.linalg.norm(np.array([p.pose.position.x, p.pose.position.y]) + origin - truth))
             return math.sqrt(np.mean(np.square(e))), len(e)
         smoothed_rmse, smoothed_count = path_rmse(smoothed[-1])
+        graph_rmse, graph_count = path_rmse(graph[-1])
         nav_rmse, _ = path_rmse(navigation[-1])
         rmse = math.sqrt(np.mean(np.square(errors)))
         mean_nees = float(np.mean(nees))
@@ -124,8 +133,13 @@ class FusionReplayTest(unittest.TestCase):
         print('fusion replay: %d fused positions, RMSE %.3f m (max %.3f m), smoothed %.3f m (%d states), dead '
               'reckoning %.3f m; mean NEES %.2f (2 expected), %.0f%% within the 95%% bounds'
               % (len(errors), rmse, max(errors), smoothed_rmse, smoothed_count, nav_rmse, mean_nees, 100 * in_bounds))
+        print('fusion replay: pose graph %d key frames, RMSE %.3f m' % (graph_count, graph_rmse))
         self.assertLess(rmse, 0.3)
         self.assertLessEqual(smoothed_rmse, rmse, 'the smoother uses the future: it does no worse than the filter')
+        # A key frame every 0.3 m or 2 s of the track; the graph uses every fix at its stamp, as the smoother does.
+        span_s = (odometry[-1].header.stamp - odometry[0].header.stamp).to_sec()
+        self.assertGreaterEqual(graph_count, 0.9 * span_s / 2.0)
+        self.assertLess(graph_rmse, 0.3)
         self.assertGreater(in_bounds, 0.8)
         self.assertTrue(0.5 < mean_nees < 6.0, 'the covariance tells the size of the error')
 

@@ -78,6 +78,7 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
         std::make_pair("navigation_path_topic", &c.navigation_path_topic),
         std::make_pair("image_path_topic", &c.image_path_topic),
         std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
+        std::make_pair("graph_path_topic", &c.graph_path_topic),
         std::make_pair("camera_height_topic", &c.camera_height_topic),
         std::make_pair("datum_out_topic", &c.datum_out_topic)}) {
     params.readTopic(name, topic);
@@ -145,6 +146,8 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
 
   params.readPositiveDouble("path_rate_hz", &c.path_rate_hz, 100.0, "rate at which the paths are republished (Hz)");
   params.readInt("max_path_poses", &c.max_path_poses, 100, 10000000, "poses per path before thinning");
+  params.readBool("pose_graph", &c.pose_graph,
+                  "run the key frames' pose graph beside the filter and publish it on ~graph_path_topic");
   params.readBool("keep_smoother_log", &c.keep_smoother_log,
                   "keep the whole dive for the RTS smoother (memory grows with the dive)");
   params.readOptionalString("track_csv", &c.track_csv, "file for the filtered track at shutdown, empty for none");

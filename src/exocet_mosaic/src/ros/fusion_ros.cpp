@@ -76,6 +76,10 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   nav_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.navigation_path_topic, 1, true);
   image_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.image_path_topic, 1, true);
   smoothed_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.smoothed_path_topic, 1, true);
+  if (config_.pose_graph) {
+    graph_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.graph_path_topic, 1, true);
+    startGraph();
+  }
   if (!config_.camera_height_topic.empty())
     camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
   if (!config_.datum_out_topic.empty())
@@ -143,6 +147,7 @@ void FusionRos::resetAll(const std::string& why) {
   last_problem_ = "reset: " + why;
   ROS_WARN_THROTTLE(1.0, "fusion: resetting the filter and the tracks: %s", why.c_str());
   front_end_->reset();
+  if (graph_) startGraph();  // the graph of the dive so far ends with the clock it was built on
   have_stamp_ = false;
   awaiting_motion_.clear();
   newest_motion_stamp_s_ = -1e300;
@@ -516,7 +521,11 @@ void FusionRos::onUsbl(const sensor_msgs::NavSatFixConstPtr& msg) {
   // With no dead reckoning expected, the first fix starts the filter.
   const bool may_start = config_.odometry_topic.empty() && config_.nav_fix_topic.empty();
   enqueue(t, [this, t, fix_en, covariance, frame, may_start]() {
-    handleOutcome("fix", front_end_->addFix(t, fix_en, covariance, frame, may_start));
+    const fu::InputOutcome outcome = front_end_->addFix(t, fix_en, covariance, frame, may_start);
+    // The fix of the camera, moved there by the mounts as the filter took it.
+    if (feeder_ && outcome.rejected.empty() && outcome.camera_en_m)
+      feeder_->addPositionFix(t, *outcome.camera_en_m, covariance);
+    handleOutcome("fix", outcome);
   });
 }
 
@@ -570,6 +579,7 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
   }
   if (!outcome.update) return;  // refused before the filter
   const bool waiting = outcome.update->status == fu::UpdateStatus::kNotInitialized;
+  if (feeder_ && !waiting) feedGraph(msg.header.stamp.toSec(), outcome);
   // A pair without a metric motion reaches the filter as an image failure: its time passes, its covariance grows.
   if (!outcome.metric && !waiting) ++motion_failures_;
   countResult(outcome.metric || waiting ? "image motion" : "image failure", *outcome.update);
@@ -721,6 +731,64 @@ void FusionRos::publishPaths() {
     path->header.stamp = path->poses.back().header.stamp.isZero() ? now : path->poses.back().header.stamp;
     pub->publish(*path);
   }
+  if (graph_) publishGraphPath();
+}
+
+void FusionRos::startGraph() {
+  if (graph_) graph_->stop();
+  graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph::BackgroundPoseGraphConfig());
+  feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
+  graph_last_yaw_rad_.reset();
+}
+
+void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
+  // The key frame's yaw: the attitude sensor's, else the operator's heading as the images carried it on.
+  const std::optional<Eigen::Quaterniond> attitude = front_end_->attitudeAt(stamp_s);
+  std::optional<double> yaw_rad;
+  if (attitude) {
+    const Eigen::Matrix3d r = attitude->toRotationMatrix();
+    yaw_rad = std::atan2(r(1, 0), r(0, 0));
+  } else if (front_end_->operatorHeading()) {
+    yaw_rad = *front_end_->operatorHeading();
+  }
+  if (!yaw_rad || !front_end_->filter().initialized()) return;
+  try {
+    const fu::FilterState state = front_end_->filter().current();
+    if (!feeder_->started()) {
+      feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
+    } else if (outcome.metric) {
+      const double yaw_change = graph::wrapAngle(*yaw_rad - graph_last_yaw_rad_.value_or(*yaw_rad));
+      feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m, outcome.metric->covariance_m2,
+                              yaw_change, attitude ? yaw_rad : std::nullopt);
+    } else {
+      feeder_->addImageFailure(stamp_s, state.position_en_m, *yaw_rad);
+    }
+    graph_last_yaw_rad_ = yaw_rad;
+  } catch (const std::invalid_argument& e) {
+    // An input the graph refuses is left out of it; the filter goes on.
+    last_problem_ = std::string("pose graph: ") + e.what();
+    ROS_WARN_THROTTLE(5.0, "fusion: pose graph: %s", e.what());
+  }
+}
+
+void FusionRos::publishGraphPath() {
+  const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
+  if (!snapshot || snapshot->key_frames.empty() || !map_origin_en_m_) return;
+  // In the map frame, as the other paths.
+  nav_msgs::Path path;
+  path.header.frame_id = config_.map_frame;
+  for (const graph::KeyFramePose& k : snapshot->key_frames) {
+    geometry_msgs::PoseStamped p;
+    p.header.frame_id = config_.map_frame;
+    p.header.stamp.fromSec(k.stamp_s);
+    p.pose.position.x = k.pose.position_en_m.x() - map_origin_en_m_->x();
+    p.pose.position.y = k.pose.position_en_m.y() - map_origin_en_m_->y();
+    p.pose.orientation.z = std::sin(0.5 * k.pose.yaw_rad);
+    p.pose.orientation.w = std::cos(0.5 * k.pose.yaw_rad);
+    path.poses.push_back(p);
+  }
+  path.header.stamp = path.poses.back().header.stamp;
+  graph_path_pub_.publish(path);
 }
 
 bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
@@ -814,6 +882,16 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.addf("gate", "p = %.9g, Mahalanobis^2 <= %.1f", front_end_->filter().config().gate_probability,
               front_end_->filter().config().gateThreshold());
   status.add("image motions", motions_);
+  if (graph_) {
+    const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
+    status.add("graph key frames", feeder_ ? feeder_->keyFrames().size() : 0);
+    if (snapshot) {
+      status.add("graph key frames solved", snapshot->key_frames.size());
+      status.addf("graph last solve", "%.3f s CPU, %s", snapshot->report.cpu_s,
+                  snapshot->report.converged ? "converged" : "bounded");
+      if (!snapshot->last_error.empty()) status.add("graph last error", snapshot->last_error);
+    }
+  }
   status.add("images awaiting their motion", awaiting_motion_.size());
   status.add("motion waits timed out", motion_waits_timed_out_);
   status.add("image motion failures", motion_failures_);

@@ -73,6 +73,10 @@ struct FusionNodeConfig {
   std::string navigation_path_topic = "/mosaic/path_navigation";  ///< dead reckoning as received
   std::string image_path_topic = "/mosaic/path_image";            ///< image motion alone from the first position
   std::string smoothed_path_topic = "/mosaic/path_smoothed";      ///< RTS smoother, on ~smooth
+  /// Run the key frames' pose graph beside the filter (exocet_mosaic_graph: image odometry between key frames, the
+  /// fixes at their stamps, headings; solved in a worker thread) and publish its key frames on graph_path_topic.
+  bool pose_graph = false;
+  std::string graph_path_topic = "/mosaic/path_graph";
   /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs

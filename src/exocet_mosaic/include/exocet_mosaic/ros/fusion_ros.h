@@ -36,6 +36,8 @@
 
 #include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/fusion/fusion_front_end.h"
+#include "exocet_mosaic/graph/background_pose_graph.h"
+#include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
 namespace exocet_mosaic {
@@ -130,6 +132,14 @@ class FusionRos {
       camera_info_sub_, datum_sub_;
   ros::ServiceServer initial_pose_srv_, smooth_srv_;
   ros::Publisher odometry_pub_, fused_path_pub_, nav_path_pub_, image_path_pub_, smoothed_path_pub_;
+  // The key frames' pose graph (~pose_graph): fed from the front-end's outcomes, solved in its worker thread.
+  std::unique_ptr<graph::BackgroundPoseGraph> graph_;
+  std::unique_ptr<graph::KeyFrameFeeder> feeder_;
+  std::optional<double> graph_last_yaw_rad_;
+  ros::Publisher graph_path_pub_;
+  void startGraph();
+  void feedGraph(double stamp_s, const fusion::InputOutcome& outcome);
+  void publishGraphPath();
   ros::Publisher camera_height_pub_, datum_pub_;
   int published_datum_zone_ = -1;  ///< zone * 2 + northern of the last /mosaic/datum, -1 before
   bool published_datum_has_origin_ = false;
