@@ -187,9 +187,8 @@ struct TruePose {
     v.camera_matrix << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1;
     v.image_size = cv::Size(c.width, c.height);
     v.camera_height_m = local_from_camera.translation().z();  // flat seabed at z = 0
-    v.level_from_camera =
-        Eigen::Quaterniond(Eigen::AngleAxisd(-yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
-                           local_from_camera.linear());
+    v.level_from_camera = Eigen::Quaterniond(Eigen::AngleAxisd(-yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+                                             local_from_camera.linear());
     return v;
   }
   Pose2d pose2d() const {
@@ -284,10 +283,10 @@ TEST(LoopVerifier, OutAndBackRevisitsMatchTheTruePoses) {
                             v.new_in_old.translation_m.y() - truth.translation_m.y(),
                             wrapAngle(v.new_in_old.yaw_rad - truth.yaw_rad));
     const double mahalanobis = std::sqrt(e.dot(v.covariance.inverse() * e));
-    std::cout << "pair " << k << ": " << (v.accepted ? "accepted" : "REFUSED: " + v.reason) << ", " << v.inliers
-              << "/" << v.matches << " inliers, hull " << v.hull_fraction << ", fb " << v.forward_backward_px
-              << " px, rms " << v.rms_residual_px << " px, scale " << v.scale << "; error " << 1000 * e.head<2>().norm()
-              << " mm, " << e.z() * 180 / M_PI << " deg; sigma " << 1000 * std::sqrt(v.covariance(0, 0)) << " mm, "
+    std::cout << "pair " << k << ": " << (v.accepted ? "accepted" : "REFUSED: " + v.reason) << ", " << v.inliers << "/"
+              << v.matches << " inliers, hull " << v.hull_fraction << ", fb " << v.forward_backward_px << " px, rms "
+              << v.rms_residual_px << " px, scale " << v.scale << "; error " << 1000 * e.head<2>().norm() << " mm, "
+              << e.z() * 180 / M_PI << " deg; sigma " << 1000 * std::sqrt(v.covariance(0, 0)) << " mm, "
               << std::sqrt(v.covariance(2, 2)) * 180 / M_PI << " deg; Mahalanobis " << mahalanobis << "\n";
     EXPECT_TRUE(v.accepted) << v.reason;
     if (!v.accepted) continue;
@@ -332,7 +331,38 @@ TEST(LoopVerifier, PlantedFalseLoopsOverRipplesAreRefused) {
     planted.push_back({{x0, 0.0, 0.8, yaw}, {x0, 1.2, 0.8, yaw}});                // along
     planted.push_back({{x0, 0.0, 0.8, yaw}, {x0 + 0.1, 1.2, 0.78, yaw + M_PI}});  // along, revisit
   }
+  // The same seabed is registrable: a true revisit over it is accepted (so the refusals below are not for want of
+  // texture).
+  {
+    const TruePose a{20.0, 0.0, 0.8, 0.2}, b{20.15, 0.1, 0.82, 0.2 + M_PI};
+    const LoopVerification v = verifier.verify(scene.render(a, 500), a.view(), scene.render(b, 501), b.view());
+    const RelativePose2d truth = between(a.pose2d(), b.pose2d());
+    std::cout << "true revisit over ripples: " << (v.accepted ? "accepted" : "REFUSED: " + v.reason) << ", "
+              << v.inliers << "/" << v.matches << " inliers, error "
+              << 1000 * (v.new_in_old.translation_m - truth.translation_m).norm() << " mm\n";
+    EXPECT_TRUE(v.accepted) << v.reason;
+    EXPECT_LT((v.new_in_old.translation_m - truth.translation_m).norm(), 0.01);
+  }
+  // Defence in depth: the same pairs through a verifier without the inlier count and fraction tests, so that the
+  // later tests (overlap, spread, similarity, forward-backward, residual) and the pose graph's switch are exercised.
+  LoopVerifierConfig lax_config;
+  lax_config.min_inliers = 4;
+  lax_config.min_inlier_fraction = 0.0;
+  const LoopVerifier lax(lax_config);
   int accepted = 0, refused_by_verifier = 0, rejected_by_graph = 0;
+  int lax_accepted = 0, lax_refused = 0, lax_rejected_by_graph = 0;
+  // Second line of defence: the pose graph's switchable loop, against an accurate chain between the two.
+  auto graphAccepts = [](const Planted& p, const LoopVerification& v) {
+    PoseGraph graph;
+    graph.addKeyFrame(0, 0.0, p.a.pose2d());
+    graph.addKeyFrame(1, 1.0, p.b.pose2d());
+    graph.addOdometry(0, 1, between(p.a.pose2d(), p.b.pose2d()), Eigen::Vector3d(1e-4, 1e-4, 1e-4).asDiagonal());
+    graph.addPositionFix(0.0, p.a.pose2d().position_en_m, Eigen::Matrix2d::Identity() * 1e-4);
+    graph.addHeading(0, p.a.yaw_rad, 0.01);
+    const int loop = graph.addLoop(0, 1, v.new_in_old, v.covariance);
+    graph.solveFull();
+    return graph.loopAccepted(loop);
+  };
   int frame = 0;
   for (const Planted& p : planted) {
     // The footprints truly do not overlap: no candidate even with a tiny overlap threshold and exact positions.
@@ -350,37 +380,40 @@ TEST(LoopVerifier, PlantedFalseLoopsOverRipplesAreRefused) {
     finder.addKeyFrame(ka);
     ASSERT_TRUE(finder.candidates(kb).empty()) << "the planted pair's footprints overlap";
 
-    const LoopVerification v =
-        verifier.verify(scene.render(p.a, frame), p.a.view(), scene.render(p.b, frame + 1), p.b.view());
+    const cv::Mat ga = scene.render(p.a, frame), gb = scene.render(p.b, frame + 1);
     frame += 2;
+    const LoopVerification v = verifier.verify(ga, p.a.view(), gb, p.b.view());
     if (!v.accepted) {
       ++refused_by_verifier;
       EXPECT_FALSE(v.reason.empty());
       std::cout << "false loop refused by the verifier: " << v.reason << "\n";
-      continue;
-    }
-    // Second line of defence: the pose graph's switchable loop, against an accurate chain between the two.
-    PoseGraph graph;
-    graph.addKeyFrame(0, 0.0, p.a.pose2d());
-    graph.addKeyFrame(1, 1.0, p.b.pose2d());
-    graph.addOdometry(0, 1, between(p.a.pose2d(), p.b.pose2d()), Eigen::Vector3d(1e-4, 1e-4, 1e-4).asDiagonal());
-    graph.addPositionFix(0.0, p.a.pose2d().position_en_m, Eigen::Matrix2d::Identity() * 1e-4);
-    graph.addHeading(0, p.a.yaw_rad, 0.01);
-    const int loop = graph.addLoop(0, 1, v.new_in_old, v.covariance);
-    graph.solveFull();
-    if (graph.loopAccepted(loop)) {
+    } else if (graphAccepts(p, v)) {
       ++accepted;
-      ADD_FAILURE() << "a false loop got through both defences: error " << v.new_in_old.translation_m.transpose();
+      ADD_FAILURE() << "a false loop got through both defences: " << v.new_in_old.translation_m.transpose();
     } else {
       ++rejected_by_graph;
       std::cout << "false loop accepted by the verifier (" << v.inliers << " inliers), rejected by the pose graph\n";
     }
+    const LoopVerification l = lax.verify(ga, p.a.view(), gb, p.b.view());
+    if (!l.accepted) {
+      ++lax_refused;
+      std::cout << "  without the inlier tests: refused: " << l.reason << "\n";
+    } else if (!graphAccepts(p, l)) {
+      ++lax_rejected_by_graph;
+      std::cout << "  without the inlier tests: accepted (" << l.inliers << " inliers), rejected by the pose graph\n";
+    } else {
+      ++lax_accepted;
+      std::cout << "  without the inlier tests: accepted and kept by the pose graph\n";
+    }
   }
   std::cout << "planted false loops: " << planted.size() << ", refused by the verifier " << refused_by_verifier
-            << ", rejected by the pose graph " << rejected_by_graph << ", accepted " << accepted << "; "
+            << ", rejected by the pose graph " << rejected_by_graph << ", accepted " << accepted
+            << "; without the inlier tests: refused " << lax_refused << ", rejected by the pose graph "
+            << lax_rejected_by_graph << ", accepted " << lax_accepted << "; "
             << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s\n";
   EXPECT_EQ(accepted, 0);
   EXPECT_EQ(refused_by_verifier + rejected_by_graph, int(planted.size()));
+  EXPECT_EQ(lax_accepted, 0) << "the later tests and the pose graph alone let a false loop through";
 }
 
 TEST(LoopVerifier, BadInput) {

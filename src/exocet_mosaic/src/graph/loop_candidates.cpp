@@ -110,10 +110,10 @@ void LoopCandidateFinder::check(const LoopKeyFrame& kf) const {
 
 std::vector<int64_t> LoopCandidateFinder::cellsOf(const LoopKeyFrame& kf) const {
   const auto corners = footprintCorners(kf.camera, kf.pose, kf.camera_height_m);
-  const double largest_var = std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(kf.position_cov_m2,
-                                                                                          Eigen::EigenvaluesOnly)
-                                               .eigenvalues()
-                                               .maxCoeff());
+  const double largest_var =
+      std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(kf.position_cov_m2, Eigen::EigenvaluesOnly)
+                        .eigenvalues()
+                        .maxCoeff());
   const double r = circumradius_m(corners, kf.pose.position_en_m) + std::sqrt(config_.gate_chi2 * largest_var);
   const Eigen::Vector2d& c = kf.pose.position_en_m;
   const int64_t x0 = int64_t(std::floor((c.x() - r) / config_.grid_cell_m));
@@ -249,9 +249,9 @@ std::vector<LoopCandidate> LoopCandidateFinder::candidates(const LoopKeyFrame& k
         moved.yaw_rad += dyaws[y];
         for (const Eigen::Vector2d& delta : shifts) {
           moved.position_en_m = old.pose.position_en_m + delta;
-          c.overlap_gated = std::max(
-              c.overlap_gated,
-              overlapFraction(new_corners, footprintCorners(old.camera, moved, old.camera_height_m), origin));
+          c.overlap_gated =
+              std::max(c.overlap_gated,
+                       overlapFraction(new_corners, footprintCorners(old.camera, moved, old.camera_height_m), origin));
         }
       }
       if (c.overlap_gated >= config_.min_overlap_fraction) out.push_back(c);

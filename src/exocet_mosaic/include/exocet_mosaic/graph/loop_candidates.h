@@ -49,10 +49,10 @@ struct FootprintCamera {
 struct LoopKeyFrame {
   int64_t id = 0;
   double stamp_s = 0.0;
-  Pose2d pose;                                                          ///< camera centre (E, N) and yaw
+  Pose2d pose;                                                           ///< camera centre (E, N) and yaw
   Eigen::Matrix2d position_cov_m2 = Eigen::Matrix2d::Identity() * 0.01;  ///< of pose.position_en_m, m^2
-  double yaw_sigma_rad = 0.02;                                          ///< 1-sigma of pose.yaw_rad, >= 0
-  double camera_height_m = 2.5;                                         ///< above the seabed, > 0
+  double yaw_sigma_rad = 0.02;                                           ///< 1-sigma of pose.yaw_rad, >= 0
+  double camera_height_m = 2.5;                                          ///< above the seabed, > 0
   FootprintCamera camera;
 };
 

@@ -68,9 +68,9 @@ struct LoopFeatures {
 };
 
 struct LoopVerifierConfig {
-  int max_features = 3000;               ///< SIFT features per image, >= 0 (0: all)
+  int max_features = 3000;                ///< SIFT features per image, >= 0 (0: all)
   double sift_contrast_threshold = 0.02;  ///< cv::SIFT's, > 0 (lower than its 0.04 for low-contrast seabed)
- /// Subtracted from cv::SIFT's keypoint coordinates (x and y), px, [-1, 1]: OpenCV 4.6's SIFT places its keypoints
+  /// Subtracted from cv::SIFT's keypoint coordinates (x and y), px, [-1, 1]: OpenCV 4.6's SIFT places its keypoints
   /// 0.25 px down and right of their true position (its first octave is the image doubled by interpolation). Left
   /// in, the bias cancels between images of the same orientation but not across a 180 deg revisit: there it moves
   /// the relative pose by 2 sqrt(2) x 0.25 px (5 mm at 7.5 mm per pixel). test_loop_closure measures it.
@@ -78,7 +78,7 @@ struct LoopVerifierConfig {
   double ratio = 0.8;                    ///< Lowe's ratio test, (0, 1]
   double ransac_threshold_px = 2.0;      ///< MAGSAC++ inlier threshold, > 0
   int ransac_iterations = 10000;         ///< >= 1
-  int min_inliers = 40;                  ///< >= 4
+  int min_inliers = 30;                  ///< >= 4
   double min_inlier_fraction = 0.25;     ///< of the ratio-test matches, [0, 1]
   double min_overlap_fraction = 0.15;    ///< overlap area through the homography / image area, [0, 1]
   double min_hull_fraction = 0.3;        ///< inliers' convex hull area / overlap area (new image), [0, 1]
@@ -103,11 +103,11 @@ struct LoopVerification {
   double inlier_fraction = 0.0;
   double overlap_fraction = 0.0;  ///< of the new image's area
   double hull_fraction = 0.0;
-  double scale = 0.0;              ///< of the seabed-to-seabed similarity
-  double projective_px = 0.0;      ///< departure from it
+  double scale = 0.0;          ///< of the seabed-to-seabed similarity
+  double projective_px = 0.0;  ///< departure from it
   double forward_backward_px = 0.0;
   double rms_residual_px = 0.0;
-  RelativePose2d new_in_old;                            ///< pose of the new key frame in the old one's frame
+  RelativePose2d new_in_old;                             ///< pose of the new key frame in the old one's frame
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< of (dx m, dy m, dyaw rad)
 };
 
