@@ -19,6 +19,7 @@ import numpy as np
 import rosbag
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry, Path
 from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
@@ -66,6 +67,13 @@ class FusionReplayTest(unittest.TestCase):
         rospy.Subscriber('/mosaic/path_navigation', Path, navigation.append, queue_size=2)
         graph = []
         rospy.Subscriber('/mosaic/path_graph', Path, graph.append, queue_size=2)
+        fusion_status = {}
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                if status.name.endswith('fusion'):
+                    fusion_status.update({kv.key: kv.value for kv in status.values})
+        rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics, queue_size=10)
         map_origin = []
 
         def on_tf(msg):
@@ -133,13 +141,21 @@ class FusionReplayTest(unittest.TestCase):
         print('fusion replay: %d fused positions, RMSE %.3f m (max %.3f m), smoothed %.3f m (%d states), dead '
               'reckoning %.3f m; mean NEES %.2f (2 expected), %.0f%% within the 95%% bounds'
               % (len(errors), rmse, max(errors), smoothed_rmse, smoothed_count, nav_rmse, mean_nees, 100 * in_bounds))
-        print('fusion replay: pose graph %d key frames, RMSE %.3f m' % (graph_count, graph_rmse))
+        print('fusion replay: pose graph %d key frames, RMSE %.3f m; loops: %s added, %s accepted by the graph, %s '
+              'candidates verified, %s key frames searched, last refusal: %s'
+              % (graph_count, graph_rmse, fusion_status.get('loops added'), fusion_status.get('graph loops accepted'),
+                 fusion_status.get('loop candidates verified'), fusion_status.get('loop key frames searched'),
+                 fusion_status.get('loop last refusal')))
         self.assertLess(rmse, 0.3)
         self.assertLessEqual(smoothed_rmse, rmse, 'the smoother uses the future: it does no worse than the filter')
         # A key frame every 0.3 m or 2 s of the track; the graph uses every fix at its stamp, as the smoother does.
         span_s = (odometry[-1].header.stamp - odometry[0].header.stamp).to_sec()
         self.assertGreaterEqual(graph_count, 0.9 * span_s / 2.0)
         self.assertLess(graph_rmse, 0.3)
+        # The return pass flies over the outbound one: loops are found, verified and kept by the graph.
+        loops_added = int(fusion_status.get('loops added', 0))
+        self.assertGreaterEqual(loops_added, 5)
+        self.assertGreaterEqual(int(fusion_status.get('graph loops accepted', 0)), 0.9 * loops_added)
         self.assertGreater(in_bounds, 0.8)
         self.assertTrue(0.5 < mean_nees < 6.0, 'the covariance tells the size of the error')
 

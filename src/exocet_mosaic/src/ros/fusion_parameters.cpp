@@ -79,6 +79,7 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
         std::make_pair("image_path_topic", &c.image_path_topic),
         std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
         std::make_pair("graph_path_topic", &c.graph_path_topic),
+        std::make_pair("loop_image_topic", &c.loop_image_topic),
         std::make_pair("camera_height_topic", &c.camera_height_topic),
         std::make_pair("datum_out_topic", &c.datum_out_topic)}) {
     params.readTopic(name, topic);
@@ -148,6 +149,10 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   params.readInt("max_path_poses", &c.max_path_poses, 100, 10000000, "poses per path before thinning");
   params.readBool("pose_graph", &c.pose_graph,
                   "run the key frames' pose graph beside the filter and publish it on ~graph_path_topic");
+  params.readBool("loop_closure", &c.loop_closure,
+                  "with ~pose_graph: find, verify and add loops live from the key frames' images (~loop_image_topic)");
+  if (c.loop_closure && !c.pose_graph)
+    throw std::invalid_argument("parameter ~loop_closure is true but ~pose_graph is false: loops need the pose graph");
   params.readBool("keep_smoother_log", &c.keep_smoother_log,
                   "keep the whole dive for the RTS smoother (memory grows with the dive)");
   params.readOptionalString("track_csv", &c.track_csv, "file for the filtered track at shutdown, empty for none");

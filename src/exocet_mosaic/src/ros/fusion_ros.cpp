@@ -6,10 +6,12 @@
 #include <stdexcept>
 
 #include <geometry_msgs/TransformStamped.h>
+#include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
+#include "exocet_mosaic/ros/image_message_decoder.h"
 
 namespace exocet_mosaic {
 
@@ -79,6 +81,8 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   if (config_.pose_graph) {
     graph_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.graph_path_topic, 1, true);
     startGraph();
+    if (config_.loop_closure)
+      loop_image_sub_ = nh_.subscribe(config_.loop_image_topic, 50, &FusionRos::onLoopImage, this);
   }
   if (!config_.camera_height_topic.empty())
     camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
@@ -386,6 +390,7 @@ void FusionRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
     return;
   }
   front_end_->setCameraMatrix(k);
+  if (!last_camera_matrix_) last_camera_matrix_ = k;  // the motions' K (of the undistorted images) takes over
   // An image is on its way through the registration: what follows it waits for its motion.
   const double t = msg->header.stamp.toSec();
   if (motion_seen_ && config_.motion_wait_s > 0.0 && !msg->header.stamp.isZero() && t > newest_motion_stamp_s_) {
@@ -564,7 +569,10 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
   motion.centre_px = Eigen::Vector2d(msg.centre_px[0], msg.centre_px[1]);
   motion.pixel_matrix = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.matrix.data());
   const Eigen::Matrix3d k = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(msg.camera_matrix.data());
-  if (k(0, 0) > 0.0 && k(1, 1) > 0.0 && k.allFinite()) motion.camera_matrix = k;
+  if (k(0, 0) > 0.0 && k(1, 1) > 0.0 && k.allFinite()) {
+    motion.camera_matrix = k;
+    last_camera_matrix_ = k;
+  }
 
   const fu::InputOutcome outcome = front_end_->addImageMotion(motion);
   if (!outcome.started_from.empty()) onStarted(outcome.started_from);
@@ -735,10 +743,76 @@ void FusionRos::publishPaths() {
 }
 
 void FusionRos::startGraph() {
+  loop_closer_.reset();  // stops its worker before the graph it feeds goes
   if (graph_) graph_->stop();
   graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph::BackgroundPoseGraphConfig());
   feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
+  if (config_.loop_closure) loop_closer_ = std::make_unique<graph::LoopCloser>(graph::LoopCloserConfig(), graph_.get());
   graph_last_yaw_rad_.reset();
+}
+
+void FusionRos::onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg) {
+  // Only the images of the last seconds: the feeder makes a key frame when the image's motion arrives.
+  const double t = msg->header.stamp.toSec();
+  recent_images_[t] = msg;
+  while (!recent_images_.empty() && (recent_images_.begin()->first < t - 30.0 || recent_images_.size() > 500))
+    recent_images_.erase(recent_images_.begin());
+}
+
+void FusionRos::offerKeyFrame(int64_t id, double stamp_s, const std::optional<Eigen::Quaterniond>& attitude,
+                              double yaw_rad) {
+  const auto it = recent_images_.lower_bound(stamp_s - 1e-4);
+  const auto camera = front_end_->cameraMount();
+  if (it == recent_images_.end() || std::abs(it->first - stamp_s) > 1e-4 || !camera || !last_camera_matrix_) {
+    ++loop_images_missing_;
+    return;
+  }
+  DecodedImage decoded;
+  const std::string error = decodeCompressedImage(*it->second, &decoded, DecodeMode::kGreyIfJpeg);
+  if (!error.empty() || decoded.image.empty()) {
+    ++loop_images_missing_;
+    return;
+  }
+  cv::Mat gray = decoded.image;
+  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+  if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 256.0);
+  const Eigen::Quaterniond world_from_base =
+      attitude.value_or(Eigen::Quaterniond(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ())));
+  const std::optional<double> height_m = front_end_->cameraHeightAt(stamp_s, world_from_base, *camera);
+  if (!height_m) {
+    ++loop_images_missing_;
+    return;
+  }
+  const Eigen::Matrix3d& k = *last_camera_matrix_;
+  graph::LoopCloserKeyFrame kf;
+  kf.key_frame.id = id;
+  kf.key_frame.stamp_s = stamp_s;
+  kf.key_frame.pose = feeder_->keyFrames().back().initial;
+  kf.key_frame.position_cov_m2 = front_end_->filter().current().position_covariance_m2;
+  kf.key_frame.yaw_sigma_rad = attitude ? 0.02 : 0.1;
+  kf.key_frame.camera_height_m = *height_m;
+  kf.key_frame.camera.fx_px = k(0, 0);
+  kf.key_frame.camera.fy_px = k(1, 1);
+  kf.key_frame.camera.cx_px = k(0, 2);
+  kf.key_frame.camera.cy_px = k(1, 2);
+  kf.key_frame.camera.width_px = gray.cols;
+  kf.key_frame.camera.height_px = gray.rows;
+  kf.view.camera_matrix = k;
+  kf.view.image_size = gray.size();
+  kf.view.camera_height_m = *height_m;
+  kf.view.camera_height_sigma_m = 0.05;
+  // The camera in the key frame's level frame (x along its yaw, y left, z up): the attitude without the yaw.
+  kf.view.level_from_camera = (Eigen::AngleAxisd(-yaw_rad, Eigen::Vector3d::UnitZ()) * world_from_base *
+                               Eigen::Quaterniond(camera->linear()))
+                                  .normalized();
+  kf.view.tilt_sigma_rad = attitude ? 0.005 : 0.03;
+  kf.gray = gray;
+  try {
+    loop_closer_->addKeyFrame(kf);
+  } catch (const std::invalid_argument& e) {
+    ++loop_images_missing_;
+    ROS_WARN_THROTTLE(5.0, "fusion: loop closure: %s", e.what());
+  }
 }
 
 void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
@@ -754,16 +828,18 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
   if (!yaw_rad || !front_end_->filter().initialized()) return;
   try {
     const fu::FilterState state = front_end_->filter().current();
+    std::optional<int64_t> key_frame;
     if (!feeder_->started()) {
-      feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
+      key_frame = feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
     } else if (outcome.metric) {
       const double yaw_change = graph::wrapAngle(*yaw_rad - graph_last_yaw_rad_.value_or(*yaw_rad));
-      feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m, outcome.metric->covariance_m2,
-                              yaw_change, attitude ? yaw_rad : std::nullopt);
+      key_frame = feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m,
+                                          outcome.metric->covariance_m2, yaw_change, attitude ? yaw_rad : std::nullopt);
     } else {
-      feeder_->addImageFailure(stamp_s, state.position_en_m, *yaw_rad);
+      key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m, *yaw_rad);
     }
     graph_last_yaw_rad_ = yaw_rad;
+    if (key_frame && loop_closer_) offerKeyFrame(*key_frame, stamp_s, attitude, *yaw_rad);
   } catch (const std::invalid_argument& e) {
     // An input the graph refuses is left out of it; the filter goes on.
     last_problem_ = std::string("pose graph: ") + e.what();
@@ -890,6 +966,19 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
       status.addf("graph last solve", "%.3f s CPU, %s", snapshot->report.cpu_s,
                   snapshot->report.converged ? "converged" : "bounded");
       if (!snapshot->last_error.empty()) status.add("graph last error", snapshot->last_error);
+      int accepted = 0;
+      for (char a : snapshot->loop_accepted) accepted += a;
+      status.add("graph loops accepted", accepted);
+    }
+    if (loop_closer_) {
+      const graph::LoopCloserStats loops = loop_closer_->stats();
+      status.add("loop key frames searched", loops.key_frames_done);
+      status.add("loop key frames without image", loop_images_missing_);
+      status.add("loop candidates verified", loops.candidates);
+      status.add("loops added", loops.loops_added);
+      status.add("loop key frames dropped (queue full)", loops.dropped);
+      if (!loops.last_refusal.empty()) status.add("loop last refusal", loops.last_refusal);
+      if (!loops.last_error.empty()) status.add("loop last error", loops.last_error);
     }
   }
   status.add("images awaiting their motion", awaiting_motion_.size());

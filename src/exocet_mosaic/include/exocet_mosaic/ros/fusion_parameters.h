@@ -77,6 +77,10 @@ struct FusionNodeConfig {
   /// fixes at their stamps, headings; solved in a worker thread) and publish its key frames on graph_path_topic.
   bool pose_graph = false;
   std::string graph_path_topic = "/mosaic/path_graph";
+  /// With pose_graph: look for loops live (graph::LoopCloser: the key frames' images from loop_image_topic, the
+  /// candidates whose footprints may overlap, verified by registration, added to the graph in a worker thread).
+  bool loop_closure = false;
+  std::string loop_image_topic = "/camera/image_raw/compressed";  ///< sensor_msgs/CompressedImage
   /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs

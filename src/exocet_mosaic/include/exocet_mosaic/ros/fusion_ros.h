@@ -25,6 +25,7 @@
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
 #include <sensor_msgs/Range.h>
@@ -38,6 +39,7 @@
 #include "exocet_mosaic/fusion/fusion_front_end.h"
 #include "exocet_mosaic/graph/background_pose_graph.h"
 #include "exocet_mosaic/graph/key_frame_feeder.h"
+#include "exocet_mosaic/graph/loop_closer.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
 namespace exocet_mosaic {
@@ -137,6 +139,14 @@ class FusionRos {
   std::unique_ptr<graph::KeyFrameFeeder> feeder_;
   std::optional<double> graph_last_yaw_rad_;
   ros::Publisher graph_path_pub_;
+  // ~loop_closure: the recent images by stamp, for the key frames the feeder makes.
+  std::unique_ptr<graph::LoopCloser> loop_closer_;
+  ros::Subscriber loop_image_sub_;
+  std::map<double, sensor_msgs::CompressedImageConstPtr> recent_images_;
+  uint64_t loop_images_missing_ = 0;
+  std::optional<Eigen::Matrix3d> last_camera_matrix_;  ///< K of the images (the motions' or camera_info's)
+  void onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg);
+  void offerKeyFrame(int64_t id, double stamp_s, const std::optional<Eigen::Quaterniond>& attitude, double yaw_rad);
   void startGraph();
   void feedGraph(double stamp_s, const fusion::InputOutcome& outcome);
   void publishGraphPath();
