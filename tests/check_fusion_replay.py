@@ -134,6 +134,29 @@ class FusionReplayTest(unittest.TestCase):
             return math.sqrt(np.mean(np.square(e))), len(e)
         smoothed_rmse, smoothed_count = path_rmse(smoothed[-1])
         graph_rmse, graph_count = path_rmse(graph[-1])
+
+        # Does the map agree with itself: for each key frame of the return, the outbound key frame nearest to it in
+        # truth (under 1 m, 30 s earlier at least); the error of their relative position, from the graph and from the
+        # filter at the same stamps.
+        def positions(path):
+            return {p.header.stamp.to_nsec(): np.array([p.pose.position.x, p.pose.position.y]) for p in path.poses}
+        graph_at = positions(graph[-1])
+        fused_at = {o.header.stamp.to_nsec(): np.array([o.pose.pose.position.x, o.pose.pose.position.y])
+                    for o in odometry}
+        truth_of = {t: truth_at(centres_sorted, keys, t) for t in graph_at}
+        pass_graph, pass_filter = [], []
+        for b in graph_at:
+            if truth_of[b] is None or b not in fused_at:
+                continue
+            earlier = [a for a in graph_at if a < b - 30e9 and truth_of[a] is not None and a in fused_at]
+            if not earlier:
+                continue
+            a = min(earlier, key=lambda a: np.linalg.norm(truth_of[a] - truth_of[b]))
+            if np.linalg.norm(truth_of[a] - truth_of[b]) > 1.0:
+                continue
+            truth_rel = truth_of[b] - truth_of[a]
+            pass_graph.append(np.linalg.norm(graph_at[b] - graph_at[a] - truth_rel))
+            pass_filter.append(np.linalg.norm(fused_at[b] - fused_at[a] - truth_rel))
         nav_rmse, _ = path_rmse(navigation[-1])
         rmse = math.sqrt(np.mean(np.square(errors)))
         mean_nees = float(np.mean(nees))
@@ -141,6 +164,8 @@ class FusionReplayTest(unittest.TestCase):
         print('fusion replay: %d fused positions, RMSE %.3f m (max %.3f m), smoothed %.3f m (%d states), dead '
               'reckoning %.3f m; mean NEES %.2f (2 expected), %.0f%% within the 95%% bounds'
               % (len(errors), rmse, max(errors), smoothed_rmse, smoothed_count, nav_rmse, mean_nees, 100 * in_bounds))
+        print('fusion replay: passes disagree by %.3f m RMS in the graph, %.3f m in the filter (%d key frames)'
+              % (math.sqrt(np.mean(np.square(pass_graph))), math.sqrt(np.mean(np.square(pass_filter))), len(pass_graph)))
         print('fusion replay: pose graph %d key frames, RMSE %.3f m; loops: %s added, %s accepted by the graph, %s '
               'candidates verified, %s key frames searched, last refusal: %s'
               % (graph_count, graph_rmse, fusion_status.get('loops added'), fusion_status.get('graph loops accepted'),
@@ -156,6 +181,9 @@ class FusionReplayTest(unittest.TestCase):
         loops_added = int(fusion_status.get('loops added', 0))
         self.assertGreaterEqual(loops_added, 5)
         self.assertGreaterEqual(int(fusion_status.get('graph loops accepted', 0)), 0.9 * loops_added)
+        self.assertGreater(len(pass_graph), 5)
+        self.assertLess(math.sqrt(np.mean(np.square(pass_graph))), 0.5 * math.sqrt(np.mean(np.square(pass_filter))),
+                        'the loops make the return pass agree with the outbound one')
         self.assertGreater(in_bounds, 0.8)
         self.assertTrue(0.5 < mean_nees < 6.0, 'the covariance tells the size of the error')
 
