@@ -80,6 +80,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   smoothed_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.smoothed_path_topic, 1, true);
   if (config_.pose_graph) {
     graph_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.graph_path_topic, 1, true);
+    graph_odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.graph_odometry_topic, 100);
     startGraph();
     if (config_.loop_closure)
       loop_image_sub_ = nh_.subscribe(config_.loop_image_topic, 50, &FusionRos::onLoopImage, this);
@@ -679,6 +680,14 @@ void FusionRos::publishState(const ros::Time& stamp) {
   const double attitude_variance = (attitude && camera) ? 1e-4 : 1e6;
   c[21] = c[28] = c[35] = attitude_variance;
   odometry_pub_.publish(odometry);
+  if (graph_odometry_pub_) {
+    // Where the graph puts this image: the filter's state moved by the graph's latest correction before it.
+    nav_msgs::Odometry moved = odometry;
+    const Eigen::Vector2d correction = graphCorrectionAt(stamp.toSec()).value_or(Eigen::Vector2d::Zero());
+    moved.pose.pose.position.x += correction.x();
+    moved.pose.pose.position.y += correction.y();
+    graph_odometry_pub_.publish(moved);
+  }
   appendPath(&fused_path_, stamp, s.position_en_m);
   publishDatum();
   if (camera_height_pub_ && attitude && camera) {
@@ -749,6 +758,20 @@ void FusionRos::startGraph() {
   feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
   if (config_.loop_closure) loop_closer_ = std::make_unique<graph::LoopCloser>(graph::LoopCloserConfig(), graph_.get());
   graph_last_yaw_rad_.reset();
+  key_frame_filter_en_m_.clear();
+}
+
+std::optional<Eigen::Vector2d> FusionRos::graphCorrectionAt(double stamp_s) const {
+  if (!graph_) return std::nullopt;
+  const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
+  if (!snapshot) return std::nullopt;
+  for (auto k = snapshot->key_frames.rbegin(); k != snapshot->key_frames.rend(); ++k) {
+    if (k->stamp_s > stamp_s + 1e-6) continue;
+    const auto filter = key_frame_filter_en_m_.find(k->id);
+    if (filter == key_frame_filter_en_m_.end()) return std::nullopt;
+    return Eigen::Vector2d(k->pose.position_en_m - filter->second);
+  }
+  return std::nullopt;
 }
 
 void FusionRos::onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg) {
@@ -839,6 +862,7 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
       key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m, *yaw_rad);
     }
     graph_last_yaw_rad_ = yaw_rad;
+    if (key_frame) key_frame_filter_en_m_[*key_frame] = state.position_en_m;
     if (key_frame && loop_closer_) offerKeyFrame(*key_frame, stamp_s, attitude, *yaw_rad);
   } catch (const std::invalid_argument& e) {
     // An input the graph refuses is left out of it; the filter goes on.

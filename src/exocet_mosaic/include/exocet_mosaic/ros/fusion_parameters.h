@@ -77,6 +77,9 @@ struct FusionNodeConfig {
   /// fixes at their stamps, headings; solved in a worker thread) and publish its key frames on graph_path_topic.
   bool pose_graph = false;
   std::string graph_path_topic = "/mosaic/path_graph";
+  /// With pose_graph: each published state again, moved by the graph's correction at the latest solved key frame
+  /// (graph pose - the filter's position there), for a tile writer that follows the graph.
+  std::string graph_odometry_topic = "/mosaic/odometry_graph";
   /// With pose_graph: look for loops live (graph::LoopCloser: the key frames' images from loop_image_topic, the
   /// candidates whose footprints may overlap, verified by registration, added to the graph in a worker thread).
   bool loop_closure = false;

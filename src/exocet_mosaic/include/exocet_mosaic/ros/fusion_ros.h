@@ -138,7 +138,10 @@ class FusionRos {
   std::unique_ptr<graph::BackgroundPoseGraph> graph_;
   std::unique_ptr<graph::KeyFrameFeeder> feeder_;
   std::optional<double> graph_last_yaw_rad_;
-  ros::Publisher graph_path_pub_;
+  ros::Publisher graph_path_pub_, graph_odometry_pub_;
+  std::map<int64_t, Eigen::Vector2d> key_frame_filter_en_m_;  ///< the filter's position when each key frame was made
+  /// The graph's correction (graph pose - filter position) at the latest solved key frame at or before `stamp_s`.
+  std::optional<Eigen::Vector2d> graphCorrectionAt(double stamp_s) const;
   // ~loop_closure: the recent images by stamp, for the key frames the feeder makes.
   std::unique_ptr<graph::LoopCloser> loop_closer_;
   ros::Subscriber loop_image_sub_;
