@@ -104,10 +104,14 @@ int64_t KeyFrameFeeder::makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odom
   FeederKeyFrame b;
   b.id = a.id + 1;
   b.stamp_s = stamp_s;
-  b.initial = chainPose();
   RelativePose2d delta;
   delta.translation_m = rotation(-a.initial.yaw_rad) * displacement_en_m_;
   delta.yaw_rad = wrapAngle(yaw_change_rad_);
+  // Started where the graph last put the previous key frame, moved by this odometry: the chain alone drifts, and a
+  // new key frame started far from the solution costs the bounded windowed solve its convergence.
+  b.initial = chainPose();
+  if (const std::shared_ptr<const GraphSnapshot> snapshot = graph_->snapshot())
+    if (const KeyFramePose* solved = snapshot->find(a.id)) b.initial = compose(solved->pose, delta);
   graph_->addKeyFrame(b.id, b.stamp_s, b.initial);
   graph_->addOdometry(a.id, b.id, delta, odometry_covariance);
   if (sensor_yaw_rad && sensor_yaw_sigma_rad > 0.0) graph_->addHeading(b.id, *sensor_yaw_rad, sensor_yaw_sigma_rad);

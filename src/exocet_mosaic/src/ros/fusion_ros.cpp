@@ -854,6 +854,9 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
     std::optional<int64_t> key_frame;
     if (!feeder_->started()) {
       key_frame = feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
+      // What the filter knew when the graph started (the dead reckoning's or the operator's start): without it the
+      // graph's absolute position rests on its first few fixes alone.
+      feeder_->addPositionFix(stamp_s, state.position_en_m, state.position_covariance_m2);
     } else if (outcome.metric) {
       const double yaw_change = graph::wrapAngle(*yaw_rad - graph_last_yaw_rad_.value_or(*yaw_rad));
       key_frame = feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m,
