@@ -175,7 +175,9 @@ TEST(KeyFrameFeeder, ARegistrationFailureMakesAKeyFrameTiedLoosely) {
   for (int i = 1; i <= 5; ++i)
     feeder.addImageMotion(10.0 + 0.1 * i, Eigen::Vector2d(0.1, 0), Eigen::Matrix2d::Identity() * 1e-6, 0.0);
   const size_t before = feeder.keyFrames().size();
-  const int64_t id = feeder.addImageFailure(11.0, Eigen::Vector2d(0.9, 0.1), 0.05);
+  // Fused displacement since the last key frame (at 0.3 m, made at 10.3 s).
+  const Eigen::Vector2d last = feeder.keyFrames().back().initial.position_en_m;
+  const int64_t id = feeder.addImageFailure(11.0, Eigen::Vector2d(0.9, 0.1) - last, 0.05);
   EXPECT_EQ(feeder.keyFrames().size(), before + 1);
   EXPECT_EQ(feeder.keyFrames().back().id, id);
   EXPECT_NEAR(feeder.keyFrames().back().initial.position_en_m.x(), 0.9, 1e-12);

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "anchor_fit.h"
+#include "canvas_warp.h"
 #include "exocet_mosaic/compose/block_canvas.h"
 #include "exocet_mosaic/compose/feather_weights.h"
 #include "exocet_mosaic/compose/lighting_corrector.h"
@@ -89,11 +90,21 @@ struct OpenMosaic {
   double start_time_s = 0, end_time_s = 0, height_sum_m = 0;
   int height_count = 0;
   std::vector<WarpedFrame> kept;  // for multi-band blending at close
+  struct Composed {
+    int index;
+    double stamp_s;
+    cv::Mat image;
+    cv::Matx33d local_from_px;
+    std::optional<Eigen::Vector2d> navigation_m;  // where the image's own pose puts its centre (ground - ref)
+  };
+  std::vector<Composed> composed;  // config.keep_composed_images: what was drawn, for ClosedMosaic::images
+  std::size_t composed_bytes = 0;
+  std::optional<Eigen::Vector2d> pending_navigation;  // the pending image's centre from its pose
   bool all_kept = true;
   std::size_t kept_bytes = 0;
 
   std::size_t memoryBytes() const {
-    return canvas.memoryBytes() + kept_bytes + (pending ? pending_image.total() * pending_image.elemSize() : 0);
+    return canvas.memoryBytes() + kept_bytes + composed_bytes + (pending ? pending_image.total() * pending_image.elemSize() : 0);
   }
   double extentM() const {
     return frames_composed == 0 ? 0.0 : std::max(extent_max.x() - extent_min.x(), extent_max.y() - extent_min.y());
@@ -154,8 +165,9 @@ cv::Mat MosaicComposer::preview(int max_side_px) const {
 namespace {
 
 /// Composes one image of the open mosaic (placed by chain) into the canvas.
-void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, const ComposerConfig& config,
-                  const LightingCorrector& lighting, FeatherWeights& feather, ComposerStats& stats) {
+void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, int frame_index, double stamp_s,
+                  const ComposerConfig& config, const LightingCorrector& lighting, FeatherWeights& feather,
+                  ComposerStats& stats) {
   cv::Mat image = config.lighting.enabled ? lighting.correct(raw) : raw;
   if (image.channels() != m.channels) {
     cv::Mat converted;
@@ -165,52 +177,20 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, c
   const cv::Matx33d local_from_px = normalizeHomography(m.p_first * chain);
   const cv::Matx33d canvas_from_px = normalizeHomography(m.canvas_from_local * local_from_px);
   const auto corners = imageCorners(image.size());
-  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
   std::array<Eigen::Vector2d, 4> footprint;
-  for (int i = 0; i < 4; ++i) {
-    const Eigen::Vector2d c = applyHomography(canvas_from_px, corners[i]);
-    x0 = std::min(x0, c.x());
-    y0 = std::min(y0, c.y());
-    x1 = std::max(x1, c.x());
-    y1 = std::max(y1, c.y());
-    footprint[i] = applyHomography(local_from_px, corners[i]);
-  }
-  const double area = (x1 - x0) * (y1 - y0);
-  if (!std::isfinite(area) || area > 64.0 * image.total() + 1e6) {
-    stats.last_problem =
-        "image not composed: its placement is degenerate (footprint of " + std::to_string(area) + " canvas px)";
-    return;
-  }
-  const cv::Rect roi(static_cast<int>(std::floor(x0)) - 1, static_cast<int>(std::floor(y0)) - 1,
-                     static_cast<int>(std::ceil(x1) - std::floor(x0)) + 3,
-                     static_cast<int>(std::ceil(y1) - std::floor(y0)) + 3);
-  const cv::Matx33d roi_from_px = translation(-roi.x, -roi.y) * canvas_from_px;
-  // One warp of the image with its weight as alpha (8 bits are plenty for blending weights). Replicated border:
-  // the pixels half covered at the footprint's edge take the edge colour, not black; the alpha fades there.
+  for (int i = 0; i < 4; ++i) footprint[i] = applyHomography(local_from_px, corners[i]);
+  // Replicated border: the pixels half covered at the footprint's edge take the edge colour, not black; the alpha
+  // fades there.
   const bool replace = config.blend == "none";
   const cv::Mat& w = replace ? feather.get(image.size(), 1e-9) : feather.get(image.size(), config.feather_power);
-  cv::Mat w8, with_alpha, warped;
-  w.convertTo(w8, CV_8U, 255.0);
-  cv::max(w8, 1, w8);  // inside the image the weight stays positive
-  std::vector<cv::Mat> planes;
-  cv::split(image, planes);
-  planes.push_back(w8);
-  cv::merge(planes, with_alpha);
-  // A ring of one pixel: the colour replicated, alpha 0, so that the partly covered pixels at the footprint's edge
-  // keep the edge colour (no dark fringe) while their weight fades to 0.
-  cv::copyMakeBorder(with_alpha, with_alpha, 1, 1, 1, 1, cv::BORDER_REPLICATE);
-  const int last = with_alpha.channels() - 1;
-  for (int y = 0; y < with_alpha.rows; ++y) {
-    uchar* row = with_alpha.ptr<uchar>(y);
-    if (y == 0 || y == with_alpha.rows - 1) {
-      for (int x = 0; x < with_alpha.cols; ++x) row[x * (last + 1) + last] = 0;
-    } else {
-      row[last] = 0;
-      row[(with_alpha.cols - 1) * (last + 1) + last] = 0;
-    }
+  CanvasWarp warp;
+  if (!warpOntoCanvas(image, w, canvas_from_px, &warp, &stats.last_problem)) return;
+  const cv::Mat& warped = warp.image_alpha;
+  const cv::Rect& roi = warp.roi;
+  if (config.keep_composed_images) {
+    m.composed.push_back({frame_index, stamp_s, image, local_from_px});
+    m.composed_bytes += image.total() * image.elemSize();
   }
-  cv::warpPerspective(with_alpha, warped, roi_from_px * translation(-1, -1), roi.size(), cv::INTER_LINEAR,
-                      cv::BORDER_CONSTANT, cv::Scalar::all(0));
   m.canvas.accumulateAlpha(warped, roi.tl(), replace);
   if (config.blend == "multiband") {
     std::vector<cv::Mat> wp;
@@ -407,10 +387,13 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     // A key frame whose image cannot be loaded is left out; the chain (from the registration) goes on.
     if (materialize()) {
       observeLighting();
-      composeImage(m, frame.image, chain, config_, s.lighting, s.feather, s.stats);
+      composeImage(m, frame.image, chain, frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
+      if (point && !m.composed.empty() && m.composed.back().index == frame.index)
+        m.composed.back().navigation_m = point->measured_m;
     }
   } else {
     m.pending = true;
+    m.pending_navigation = point ? std::optional<Eigen::Vector2d>(point->measured_m) : std::nullopt;
     m.pending_chain = chain;
     if (!frame.image.empty()) {
       frame.image.copyTo(m.pending_image);  // a copy: the caller may reuse its buffer
@@ -496,6 +479,7 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
   m->start_time_s = m->end_time_s = frame.stamp_s;
   m->frames_added = 1;
   m->last_size = size;
+  std::optional<Eigen::Vector2d> first_navigation;
   if (from_pose) {
     m->height_sum_m = frame.pose->camera_height_m;
     m->height_count = 1;
@@ -504,6 +488,7 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
     p.cov_m2 = frame.pose->position_cov_m2;
     m->points.push_back(p);
     m->running.add(p);
+    first_navigation = p.measured_m;
   }
   if (continued && s.tie.valid && s.tie.points_utm.size() == tieGrid(size).size()) {
     // Tied with the continuity slack only: the tiles stay aligned; the closed tile's own uncertainty enters the
@@ -523,7 +508,8 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
     m->tie.error_cov = s.tie.error_cov;
   }
   s.tie.valid = false;
-  composeImage(*m, frame.image, cv::Matx33d::eye(), config_, s.lighting, s.feather, s.stats);
+  composeImage(*m, frame.image, cv::Matx33d::eye(), frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
+  if (!m->composed.empty()) m->composed.back().navigation_m = first_navigation;
   s.open = std::move(m);
   s.previous_in_chain = true;
 }
@@ -537,8 +523,12 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   if (m.pending && m.pending_image.empty() && m.pending_load)
     m.pending_image =
         loadImage(m.pending_load, m.pending_size, m.pending_channels, m.last_frame, &s.stats.last_problem);
-  if (m.pending && !m.pending_image.empty())
-    composeImage(m, m.pending_image, m.pending_chain, config_, s.lighting, s.feather, s.stats);
+  if (m.pending && !m.pending_image.empty()) {
+    composeImage(m, m.pending_image, m.pending_chain, m.last_frame, m.end_time_s, config_, s.lighting, s.feather,
+                 s.stats);
+    if (!m.composed.empty() && m.composed.back().index == m.last_frame)
+      m.composed.back().navigation_m = m.pending_navigation;
+  }
   const cv::Rect region = m.canvas.dataBounds();
   if (region.empty()) return std::nullopt;
 
@@ -607,6 +597,12 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
     out.origin_easting_m = m.ref_en_m.x() + region.x * g + shift.x();
     out.origin_northing_m = m.ref_en_m.y() - region.y * g + shift.y();
   }
+  const cv::Matx33d ground_from_local =
+      out.resampled ? fitMatrix(fit) : translation(shift.x(), shift.y());  // as the raster was drawn
+  out.ground_origin_en_m = m.ref_en_m;
+  for (const auto& c : m.composed)
+    out.images.push_back(
+        {c.index, c.stamp_s, c.image, normalizeHomography(ground_from_local * c.local_from_px), c.navigation_m});
   for (const auto& f : m.footprints_local) {
     std::array<Eigen::Vector2d, 4> u;
     for (int i = 0; i < 4; ++i) u[i] = m.ref_en_m + (out.resampled ? fit.apply(f[i]) : Eigen::Vector2d(f[i] + shift));

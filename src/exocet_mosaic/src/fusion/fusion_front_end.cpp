@@ -154,6 +154,12 @@ std::optional<Eigen::Quaterniond> FusionFrontEnd::attitudeAt(double stamp_s) con
   return std::nullopt;
 }
 
+std::optional<double> FusionFrontEnd::newestAttitudeStamp() const {
+  const std::optional<double> imu = imu_attitude_.newestStamp(), nav = nav_attitude_.newestStamp();
+  if (imu && nav) return std::max(*imu, *nav);
+  return imu ? imu : nav;
+}
+
 std::optional<Eigen::Quaterniond> FusionFrontEnd::viewAttitudeAt(double stamp_s) const {
   const std::optional<Eigen::Quaterniond> at = attitudeAt(stamp_s);
   if (!at || config_.view_half_window_s <= 0.0) return at;

@@ -34,6 +34,8 @@ std::string KeyFrameFeederConfig::validate() const {
   if (!(odometry_floor_m >= 0.0 && odometry_floor_m <= 10.0))
     e << "odometry_floor_m = " << odometry_floor_m << " outside [0, 10] m; ";
   if (!(gap_sigma_m > 0.0 && gap_sigma_m <= 1000.0)) e << "gap_sigma_m = " << gap_sigma_m << " outside (0, 1000] m; ";
+  if (!(gap_drift_mps >= 0.0 && gap_drift_mps <= 100.0))
+    e << "gap_drift_mps = " << gap_drift_mps << " outside [0, 100] m/s; ";
   if (!(gap_yaw_sigma_rad > 0.0 && gap_yaw_sigma_rad <= 10.0))
     e << "gap_yaw_sigma_rad = " << gap_yaw_sigma_rad << " outside (0, 10] rad; ";
   std::string text = e.str();
@@ -123,15 +125,19 @@ int64_t KeyFrameFeeder::makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odom
   return b.id;
 }
 
-int64_t KeyFrameFeeder::addImageFailure(double stamp_s, const Eigen::Vector2d& fused_en_m, double fused_yaw_rad) {
+int64_t KeyFrameFeeder::addImageFailure(double stamp_s, const Eigen::Vector2d& fused_displacement_en_m,
+                                        double fused_yaw_rad) {
   if (!started()) throw std::invalid_argument("key-frame feeder: an image failure before start()");
-  requireFinite(std::isfinite(stamp_s) && fused_en_m.allFinite() && std::isfinite(fused_yaw_rad), "an image failure");
-  // Across the gap the chain knows nothing: the fused position stands in, loosely.
-  displacement_en_m_ = fused_en_m - key_frames_.back().initial.position_en_m;
+  requireFinite(std::isfinite(stamp_s) && fused_displacement_en_m.allFinite() && std::isfinite(fused_yaw_rad),
+                "an image failure");
+  // Across the gap the chain knows nothing: the fused navigation's displacement stands in, with its relative error.
+  displacement_en_m_ = fused_displacement_en_m;
   yaw_change_rad_ = wrapAngle(fused_yaw_rad - key_frames_.back().initial.yaw_rad);
   pairs_ = 0;
+  const double gap_s = std::max(0.0, stamp_s - key_frames_.back().stamp_s);
+  const double sigma_m = config_.gap_sigma_m + config_.gap_drift_mps * gap_s;
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  covariance(0, 0) = covariance(1, 1) = config_.gap_sigma_m * config_.gap_sigma_m;
+  covariance(0, 0) = covariance(1, 1) = sigma_m * sigma_m;
   covariance(2, 2) = config_.gap_yaw_sigma_rad * config_.gap_yaw_sigma_rad;
   last_stamp_s_ = stamp_s;
   return makeKeyFrame(stamp_s, covariance, std::nullopt, 0.0);

@@ -80,6 +80,7 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
         std::make_pair("smoothed_path_topic", &c.smoothed_path_topic),
         std::make_pair("graph_path_topic", &c.graph_path_topic),
         std::make_pair("graph_odometry_topic", &c.graph_odometry_topic),
+        std::make_pair("graph_corrections_topic", &c.graph_corrections_topic),
         std::make_pair("loop_image_topic", &c.loop_image_topic),
         std::make_pair("camera_height_topic", &c.camera_height_topic),
         std::make_pair("datum_out_topic", &c.datum_out_topic)}) {

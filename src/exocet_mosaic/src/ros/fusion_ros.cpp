@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include <geometry_msgs/TransformStamped.h>
+#include <ros/callback_queue.h>
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
@@ -65,7 +66,9 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   subscribe(&odometry_sub_, config_.odometry_topic, 200, &FusionRos::onOdometry);
   subscribe(&nav_fix_sub_, config_.nav_fix_topic, 200, &FusionRos::onNavFix);
   subscribe(&usbl_sub_, config_.usbl_topic, 50, &FusionRos::onUsbl);
-  subscribe(&imu_sub_, config_.imu_topic, 500, &FusionRos::onImu);
+  // Deep enough for a replay at 16x while a callback (a key frame's image, a graph snapshot) holds the thread: an IMU
+  // sample dropped from the queue is an image without attitude, so a gap in the pose graph's image odometry.
+  subscribe(&imu_sub_, config_.imu_topic, 5000, &FusionRos::onImu);
   subscribe(&altitude_sub_, config_.altitude_topic, 200, &FusionRos::onAltitude);
   subscribe(&depth_sub_, config_.depth_topic, 200, &FusionRos::onDepth);  // used with ~seabed_depth_m
   // One camera_info per image announces it (its motion holds back the later inputs): as deep as the motions' queue,
@@ -81,6 +84,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   if (config_.pose_graph) {
     graph_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.graph_path_topic, 1, true);
     graph_odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.graph_odometry_topic, 100);
+    graph_corrections_pub_ = nh_.advertise<exocet_msgs::PositionCorrections>(config_.graph_corrections_topic, 1, true);
     startGraph();
     if (config_.loop_closure)
       loop_image_sub_ = nh_.subscribe(config_.loop_image_topic, 50, &FusionRos::onLoopImage, this);
@@ -335,9 +339,16 @@ void FusionRos::release(bool everything) {
     if (!everything) ++motion_waits_timed_out_;
     awaiting_motion_.erase(awaiting_motion_.begin());
   }
-  auto due = [this](double stamp_s) {
+  // An image's attitude is interpolated between samples: an input also waits for the attitude sample after it (its
+  // topic may lag the others by more than the reorder delay when this thread is busy), unless the attitude has
+  // stopped coming (kAttitudeWait_s beyond the delay).
+  constexpr double kAttitudeWait_s = 1.0;
+  const std::optional<double> attitude_s = front_end_->newestAttitudeStamp();
+  auto due = [&](double stamp_s) {
     return stamp_s <= newest_stamp_s_ - config_.reorder_delay_s &&
-           (awaiting_motion_.empty() || stamp_s < awaiting_motion_.begin()->first);
+           (awaiting_motion_.empty() || stamp_s < awaiting_motion_.begin()->first) &&
+           (!attitude_s || stamp_s <= *attitude_s ||
+            stamp_s <= newest_stamp_s_ - config_.reorder_delay_s - kAttitudeWait_s);
   };
   while (!queue_.empty() && (everything || due(queue_.begin()->first))) {
     auto apply = std::move(queue_.begin()->second);
@@ -738,8 +749,13 @@ void FusionRos::publishDatum() {
 }
 
 void FusionRos::publishPaths() {
-  // The inputs stopped (end of a bag, a pause): what waits for newer inputs goes to the filter now.
-  if (!queue_.empty() && (ros::SteadyTime::now() - last_input_wall_).toSec() > std::max(0.5, config_.reorder_delay_s))
+  // The inputs stopped (end of a bag, a pause): what waits for newer inputs goes to the filter now. Not while
+  // callbacks are still queued: then this thread was busy, not the inputs stopped, and releasing a motion before the
+  // IMU samples queued behind it leaves its image without attitude.
+  auto* callbacks = dynamic_cast<ros::CallbackQueue*>(nh_.getCallbackQueue());
+  const bool inputs_queued = callbacks && !callbacks->isEmpty();
+  if (!queue_.empty() && !inputs_queued &&
+      (ros::SteadyTime::now() - last_input_wall_).toSec() > std::max(0.5, config_.reorder_delay_s))
     release(true);
   const ros::Time now = ros::Time::now();
   for (auto [path, pub] : {std::make_pair(&fused_path_, &fused_path_pub_), std::make_pair(&nav_path_, &nav_path_pub_),
@@ -862,7 +878,12 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
       key_frame = feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m,
                                           outcome.metric->covariance_m2, yaw_change, attitude ? yaw_rad : std::nullopt);
     } else {
-      key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m, *yaw_rad);
+      // The fused displacement since the last key frame (the fused position there, not the graph's).
+      const graph::FeederKeyFrame& last = feeder_->keyFrames().back();
+      const auto last_fused = key_frame_filter_en_m_.find(last.id);
+      const Eigen::Vector2d from = last_fused != key_frame_filter_en_m_.end() ? last_fused->second
+                                                                             : last.initial.position_en_m;
+      key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m - from, *yaw_rad);
     }
     graph_last_yaw_rad_ = yaw_rad;
     if (key_frame) key_frame_filter_en_m_[*key_frame] = state.position_en_m;
@@ -892,6 +913,24 @@ void FusionRos::publishGraphPath() {
   }
   path.header.stamp = path.poses.back().header.stamp;
   graph_path_pub_.publish(path);
+
+  // The corrections, once per solve: the tile writer redraws the tiles whose images they move.
+  if (snapshot == last_corrections_snapshot_) return;
+  exocet_msgs::PositionCorrections corrections;
+  corrections.header.frame_id = world_frame_;
+  for (const graph::KeyFramePose& k : snapshot->key_frames) {
+    const auto filter = key_frame_filter_en_m_.find(k.id);
+    if (filter == key_frame_filter_en_m_.end()) continue;
+    ros::Time stamp;
+    stamp.fromSec(k.stamp_s);
+    corrections.stamps.push_back(stamp);
+    corrections.east_m.push_back(k.pose.position_en_m.x() - filter->second.x());
+    corrections.north_m.push_back(k.pose.position_en_m.y() - filter->second.y());
+  }
+  if (corrections.stamps.empty()) return;
+  corrections.header.stamp = corrections.stamps.back();
+  graph_corrections_pub_.publish(corrections);
+  last_corrections_snapshot_ = snapshot;
 }
 
 bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {

@@ -97,6 +97,16 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
                "flush and shut down after this many wall seconds without input, 0: never");
   p.readInt("max_failed_tiles_kept", &c.max_failed_tiles_kept, 0, 100, "closed mosaics kept for a write retry");
   p.readPositiveDouble("retry_period_s", &c.retry_period_s, 3600.0, "period of write retries (s)");
+  p.readOptionalString("graph_corrections_topic", &c.graph_corrections_topic,
+                       "pose graph corrections to follow (exocet_msgs/PositionCorrections), empty: none");
+  p.readDouble("rerender_threshold_gsd", &c.rerender_threshold_gsd, 0.05, 1000.0,
+               "image move (ground sample distances) that makes a written tile drawn again");
+  p.readDouble("rerender_period_s", &c.rerender_period_s, 0.05, 600.0, "wall seconds between looks at the tiles");
+  p.readBool("keep_images", &c.keep_images, "keep the tiles' images for drawing them again");
+  p.readInt("kept_image_quality", &c.kept_image_quality, 50, 100, "JPEG quality of the kept images");
+  p.readBool("gain_compensation", &c.gain_compensation, "match each new tile's gains to the written tiles");
+  if (!c.graph_corrections_topic.empty()) c.keep_images = true;
+  c.composer.keep_composed_images = c.keep_images;
   return c;
 }
 

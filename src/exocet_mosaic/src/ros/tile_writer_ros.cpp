@@ -5,12 +5,17 @@
 #include <filesystem>
 #include <stdexcept>
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <cv_bridge/cv_bridge.h>
 #include <exocet_msgs/Tile.h>
 #include <visualization_msgs/MarkerArray.h>
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/atomic_file.h"
 #include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
@@ -49,6 +54,12 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     ROS_ERROR("tile writer: %s", last_write_error_.c_str());
   }
   writer_ = std::make_unique<tiles::GeoTiffTileWriter>(config_.files);
+  if (config_.keep_images) {
+    images_dir_ = config_.files.output_dir + "/.exocet_images";
+    std::error_code error;
+    std::filesystem::create_directories(images_dir_, error);
+    if (error) ROS_ERROR("tile writer: cannot create %s: %s", images_dir_.c_str(), error.message().c_str());
+  }
   const int stale = writer_->removeStaleTemporaries();
   if (stale > 0) ROS_WARN("tile writer: removed %d partial file(s) left by an interrupted run", stale);
   if (!config_.udp_host.empty()) notifier_ = std::make_unique<tiles::TileNotifier>(config_.udp_host, config_.udp_port);
@@ -74,6 +85,8 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   height_sub_ = nh_.subscribe(config_.camera_height_topic, per_image_queue, &TileWriterRos::onCameraHeight, this);
   datum_sub_ = nh_.subscribe(config_.datum_topic, 1, &TileWriterRos::onDatum, this);
   camera_info_sub_ = nh_.subscribe(config_.camera_info_topic, 5, &TileWriterRos::onCameraInfo, this);
+  if (!config_.graph_corrections_topic.empty())
+    corrections_sub_ = nh_.subscribe(config_.graph_corrections_topic, 1, &TileWriterRos::onCorrections, this);
 
   // The operator's knobs: start from the parameters read above, then follow dynamic_reconfigure.
   reconfigure_server_ =
@@ -95,6 +108,7 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
       [this](exocet_mosaic::TileWriterConfig& c, uint32_t level) { onReconfigure(c, level); });
 
   writer_thread_ = std::thread([this]() { writerLoop(); });
+  if (!config_.graph_corrections_topic.empty()) rerender_thread_ = std::thread([this]() { rerenderLoop(); });
   flush_srv_ = private_nh_.advertiseService("flush", &TileWriterRos::onFlush, this);
 
   updater_.setHardwareID("tile writer " + config_.files.output_dir);
@@ -112,6 +126,23 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
 TileWriterRos::~TileWriterRos() {
   timer_.stop();
   flushAll("flush");
+  {
+    std::lock_guard<std::mutex> lock(rerender_mutex_);
+    stop_rerender_ = true;
+  }
+  rerender_cv_.notify_all();
+  if (rerender_thread_.joinable()) rerender_thread_.join();
+  if (!config_.graph_corrections_topic.empty()) {
+    // The tiles as the last corrections place them: the written ones first, then one last look.
+    {
+      std::unique_lock<std::mutex> lock(write_mutex_);
+      write_cv_.wait_for(lock, std::chrono::seconds(120), [this]() { return write_queue_.empty() && !writing_; });
+    }
+    rerenderDue();
+    saveCorrections();
+    std::unique_lock<std::mutex> lock(write_mutex_);
+    write_cv_.wait_for(lock, std::chrono::seconds(300), [this]() { return write_queue_.empty() && !writing_; });
+  }
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     stop_writer_ = true;
@@ -400,6 +431,17 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
       pose.world_from_camera = frame.pose->world_from_camera;
       pose.camera_height_m = *frame.camera_height_m;
       pose.camera_matrix = k;
+      if (!config_.graph_corrections_topic.empty()) {
+        // Where the pose graph puts the image (its latest correction there); kept to move the image again later.
+        Eigen::Vector2d correction;
+        {
+          std::lock_guard<std::mutex> lock(corrections_mutex_);
+          correction = corrections_.at(input.stamp_s);
+        }
+        pose.camera_en_m += correction;
+        used_corrections_[input.index] = correction;
+        while (used_corrections_.size() > 100000) used_corrections_.erase(used_corrections_.begin());
+      }
       input.pose = pose;
     } else {
       last_problem_ = "no camera matrix (image motion or camera_info): images cannot be placed";
@@ -513,10 +555,23 @@ void TileWriterRos::publishPreview() {
 // ---------------------------------------------------------------------------------------------------------------
 // Writing (worker thread).
 
+TileWriterRos::PendingTile TileWriterRos::pendingTile(compose::ClosedMosaic mosaic) {
+  PendingTile pending;
+  for (const auto& image : mosaic.images) {
+    const auto used = used_corrections_.find(image.index);
+    pending.image_corrections_m.push_back(used == used_corrections_.end() ? Eigen::Vector2d::Zero() : used->second);
+  }
+  // The next mosaic starts with this one's last image: what is older is no longer needed.
+  used_corrections_.erase(used_corrections_.begin(), used_corrections_.lower_bound(mosaic.last_frame));
+  pending.mosaic = std::move(mosaic);
+  return pending;
+}
+
 void TileWriterRos::enqueue(compose::ClosedMosaic mosaic) {
+  PendingTile pending = pendingTile(std::move(mosaic));
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
-    write_queue_.push_back(PendingTile{std::move(mosaic), 0});
+    write_queue_.push_back(std::move(pending));
   }
   write_cv_.notify_all();
 }
@@ -542,6 +597,14 @@ void TileWriterRos::writerLoop() {
       failed_tiles_.pop_front();
       last_retry = ros::WallTime::now();
     }
+    if (pending.revision) {
+      if (files_update_) {
+        writer_ = std::make_unique<tiles::GeoTiffTileWriter>(*files_update_);
+        files_update_.reset();
+      }
+      writeRevision(pending, writer_.get(), lock);
+      continue;
+    }
     if (!utm_zone_ && local_frame_.empty()) {
       // No zone yet (no datum): keep the mosaic until one arrives.
       last_write_error_ = "no UTM zone known (no /mosaic/datum and ~utm_zone is 0): tile kept in memory";
@@ -552,8 +615,13 @@ void TileWriterRos::writerLoop() {
       }
       continue;
     }
-    const tiles::TileRaster raster =
-        tiles::tileRaster(pending.mosaic, utm_zone_.value_or(0), northern_, local_frame_);
+    tiles::TileRaster raster = tiles::tileRaster(pending.mosaic, utm_zone_.value_or(0), northern_, local_frame_);
+    std::optional<compose::TileGains> gains;
+    if (config_.gain_compensation) {
+      // Matched to the tiles written where they overlap (the compensator is this thread's).
+      gains = gains_.estimate(raster, -1);
+      raster = compose::TileGainCompensator::apply(raster, *gains);
+    }
     const tiles::TileMetadata metadata = tiles::tileMetadata(pending.mosaic, config_.dive_name);
     if (files_update_) {
       writer_ = std::make_unique<tiles::GeoTiffTileWriter>(*files_update_);
@@ -563,7 +631,17 @@ void TileWriterRos::writerLoop() {
     writing_ = true;
     lock.unlock();  // the write takes time: let the composition enqueue meanwhile
     const tiles::WrittenTile tile = writer->write(raster, metadata);
+    std::optional<tiles::TileRecord> record;
+    if (tile.ok && config_.keep_images) record = keepRecord(pending, tile, *writer);
+    if (tile.ok && gains) gains_.record(tile.index, raster, *gains);
     lock.lock();
+    if (tile.ok && gains) {
+      char note[160];
+      std::snprintf(note, sizeof(note), "tile %d: gains %.3f %.3f %.3f, level step %.1f -> %.1f grey over %d cells",
+                    tile.index, gains->gain[0], gains->gain[1], gains->gain[2], gains->step_before_grey,
+                    gains->step_after_grey, gains->common_cells);
+      last_gain_note_ = note;
+    }
     writing_ = false;
     last_write_failed_ = !tile.ok;
     if (!tile.ok) {
@@ -582,6 +660,12 @@ void TileWriterRos::writerLoop() {
       continue;
     }
     ++tiles_written_;
+    if (record) {
+      images_kept_ += static_cast<std::int64_t>(record->images.size());
+      images_not_kept_ += static_cast<std::int64_t>(pending.mosaic.images.size() - record->images.size());
+      records_[record->index] = std::move(*record);
+    }
+    pending.mosaic.images.clear();  // on disk now
     ROS_INFO("tile writer: %s (%dx%d px, %.3f m/px, EPSG %d, frames %d-%d, %s) in %.0f ms", tile.geotiff_path.c_str(),
              tile.width_px, tile.height_px, tile.gsd_m, tile.epsg, pending.mosaic.first_frame,
              pending.mosaic.last_frame, pending.mosaic.close_reason.c_str(), tile.write_ms);
@@ -590,11 +674,237 @@ void TileWriterRos::writerLoop() {
   }
 }
 
+// ---------------------------------------------------------------------------------------------------------------
+// Tiles that follow the pose graph.
+
+void TileWriterRos::onCorrections(const exocet_msgs::PositionCorrectionsConstPtr& msg) {
+  const std::size_t n = msg->stamps.size();
+  if (msg->east_m.size() != n || msg->north_m.size() != n) {
+    reject("graph corrections whose stamps, east_m and north_m differ in length: ignored");
+    return;
+  }
+  std::vector<double> stamps;
+  std::vector<Eigen::Vector2d> values;
+  stamps.reserve(n);
+  values.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    stamps.push_back(msg->stamps[i].toSec());
+    values.emplace_back(msg->east_m[i], msg->north_m[i]);
+  }
+  int left_out = 0;
+  {
+    std::lock_guard<std::mutex> lock(corrections_mutex_);
+    left_out = corrections_.set(stamps, values);
+    ++corrections_received_;
+  }
+  if (left_out > 0)
+    ROS_WARN_THROTTLE(10.0, "tile writer: %d graph correction(s) not finite or not in time order: left out", left_out);
+  rerender_cv_.notify_all();
+}
+
+std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
+                                                           const tiles::GeoTiffTileWriter& writer) {
+  const compose::ClosedMosaic& mosaic = pending.mosaic;
+  tiles::TileRecord record;
+  record.index = tile.index;
+  record.version = tile.version;
+  record.ground_origin_en_m = mosaic.ground_origin_en_m;
+  record.gsd_m = mosaic.gsd_m;
+  record.utm_zone = utm_zone_.value_or(0);
+  record.northern_hemisphere = northern_;
+  record.local_frame = tile.local_frame;
+  record.metadata = tile.metadata;
+  for (std::size_t i = 0; i < mosaic.images.size(); ++i) {
+    const compose::ComposedImage& image = mosaic.images[i];
+    tiles::RecordedImage kept;
+    kept.frame = image.index;
+    kept.stamp_s = image.stamp_s;
+    kept.file = tiles::recordedImageName(config_.files.prefix, image.stamp_s);
+    kept.width_px = image.image.cols;
+    kept.height_px = image.image.rows;
+    kept.closed_ground_from_px = kept.ground_from_px = image.ground_from_px;
+    kept.closed_correction_m =
+        i < pending.image_corrections_m.size() ? pending.image_corrections_m[i] : Eigen::Vector2d::Zero();
+    kept.closed_navigation_m = image.navigation_m;
+    const std::string error =
+        tiles::writeRecordedImage(images_dir_, kept.file, image.image, config_.kept_image_quality);
+    if (!error.empty()) {
+      ROS_WARN_THROTTLE(10.0, "tile writer: %s (the tile cannot be drawn again with it)", error.c_str());
+      continue;
+    }
+    record.images.push_back(kept);
+  }
+  try {
+    exocet_common::writeJsonFileAtomically(images_dir_ + "/" + writer.baseName(tile.index) + ".json",
+                                           tiles::tileRecordToJson(record));
+  } catch (const std::exception& e) {
+    ROS_WARN_THROTTLE(10.0, "tile writer: record of tile %d not kept: %s", tile.index, e.what());
+  }
+  return record;
+}
+
+namespace {
+
+/// What a Tile message and the log say about a tile drawn again (its record's metadata).
+compose::ClosedMosaic summaryOf(const tiles::TileRecord& record) {
+  compose::ClosedMosaic m;
+  const tiles::TileMetadata& d = record.metadata;
+  m.first_frame = d.first_frame;
+  m.last_frame = d.last_frame;
+  m.start_time_s = d.start_time_s;
+  m.end_time_s = d.end_time_s;
+  m.mean_camera_height_m = std::isfinite(d.mean_altitude_m) ? d.mean_altitude_m : 0.0;
+  m.close_reason = d.close_reason;
+  m.frames_composed = static_cast<int>(record.images.size());
+  const auto sigma = d.extra.find("position_sigma_m");
+  if (sigma != d.extra.end()) m.anchor_sigma_m = std::strtod(sigma->second.c_str(), nullptr);
+  m.gsd_m = record.gsd_m;
+  return m;
+}
+
+}  // namespace
+
+void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter* writer,
+                                  std::unique_lock<std::mutex>& lock) {
+  tiles::RevisedTile& revision = *pending.revision;
+  const tiles::TileRecord& record = revision.record;
+  writing_ = true;
+  lock.unlock();
+  // The tile keeps the gains it was first written with (its neighbours were matched to them).
+  std::optional<compose::TileGains> gains = config_.gain_compensation ? gains_.gainsOf(record.index) : std::nullopt;
+  if (gains && gains->channels == revision.raster.image.channels())
+    revision.raster = compose::TileGainCompensator::apply(revision.raster, *gains);
+  const tiles::WrittenTile tile = writer->writeVersion(revision.raster, record.metadata, record.index, record.version);
+  if (tile.ok && gains && gains->channels == revision.raster.image.channels())
+    gains_.record(record.index, revision.raster, *gains);
+  if (tile.ok) {
+    // The previous version goes once the new one is complete.
+    writer->removeVersion(record.index, record.version - 1);
+    try {
+      exocet_common::writeJsonFileAtomically(images_dir_ + "/" + writer->baseName(record.index) + ".json",
+                                             tiles::tileRecordToJson(record));
+    } catch (const std::exception& e) {
+      ROS_WARN_THROTTLE(10.0, "tile writer: record of tile %d not kept: %s", record.index, e.what());
+    }
+  }
+  lock.lock();
+  writing_ = false;
+  revision_pending_.erase(record.index);
+  if (!tile.ok) {
+    // The previous version stays; the next look tries again.
+    ++rerender_failures_;
+    last_rerender_problem_ = "tile " + std::to_string(record.index) + " not written again: " + tile.error;
+    ROS_ERROR_THROTTLE(5.0, "tile writer: %s", last_rerender_problem_.c_str());
+    write_cv_.notify_all();
+    return;
+  }
+  records_[record.index] = record;
+  ++tiles_rerendered_;
+  ROS_INFO("tile writer: %s drawn again (version %d, images moved by up to %.3f m) in %.0f ms",
+           tile.geotiff_path.c_str(), tile.version, revision.moved_max_m, tile.write_ms);
+  publishTile(tile, pending.mosaic);
+  write_cv_.notify_all();
+}
+
+void TileWriterRos::rerenderLoop() {
+  // Drawing tiles again may wait; the chain may not: this thread yields the CPU to the node's others.
+  ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), 10);
+  std::unique_lock<std::mutex> lock(rerender_mutex_);
+  ros::WallTime last_save = ros::WallTime::now();
+  while (!stop_rerender_) {
+    rerender_cv_.wait_for(lock, std::chrono::duration<double>(config_.rerender_period_s),
+                          [this]() { return stop_rerender_; });
+    if (stop_rerender_) break;
+    lock.unlock();
+    rerenderDue();
+    if ((ros::WallTime::now() - last_save).toSec() > 10.0) {
+      saveCorrections();
+      last_save = ros::WallTime::now();
+    }
+    lock.lock();
+  }
+}
+
+int TileWriterRos::rerenderDue() {
+  tiles::PositionCorrectionTrack track;
+  std::int64_t received = 0;
+  {
+    std::lock_guard<std::mutex> lock(corrections_mutex_);
+    track = corrections_;
+    received = corrections_received_;
+  }
+  if (track.empty()) return 0;
+  std::vector<tiles::TileRecord> due;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    for (const auto& [index, record] : records_) {
+      if (revision_pending_.count(index)) continue;
+      const auto failed = revision_failed_at_.find(index);
+      if (failed != revision_failed_at_.end() && failed->second == received) continue;  // same corrections failed
+      const double moved_m = tiles::tileDisplacementM(record, track);
+      max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
+      if (moved_m > config_.rerender_threshold_gsd * record.gsd_m) due.push_back(record);
+    }
+  }
+  compose::PlacedImageRenderConfig render;
+  render.blend = config_.composer.blend;
+  render.feather_power = config_.composer.feather_power;
+  render.multiband_bands = config_.composer.multiband_bands;
+  int queued = 0;
+  for (const tiles::TileRecord& record : due) {
+    const auto start = std::chrono::steady_clock::now();
+    tiles::RevisedTile revision = tiles::renderTileAt(record, track, images_dir_, render);
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    last_rerender_ms_ = ms;
+    if (revision.raster.image.empty()) {
+      ++rerender_failures_;
+      revision_failed_at_[record.index] = received;
+      last_rerender_problem_ = "tile " + std::to_string(record.index) + " cannot be drawn again: " + revision.problem;
+      ROS_WARN_THROTTLE(10.0, "tile writer: %s", last_rerender_problem_.c_str());
+      continue;
+    }
+    if (!revision.problem.empty()) last_rerender_problem_ = revision.problem;
+    revision.record.metadata.extra["blend"] = render.blend;
+    revision_failed_at_.erase(record.index);
+    revision_pending_.insert(record.index);
+    PendingTile pending;
+    pending.mosaic = summaryOf(revision.record);
+    pending.revision = std::move(revision);
+    write_queue_.push_back(std::move(pending));
+    write_cv_.notify_all();
+    ++queued;
+  }
+  return queued;
+}
+
+void TileWriterRos::saveCorrections() {
+  if (images_dir_.empty()) return;
+  std::string text = "stamp_s,east_m,north_m\n";
+  {
+    std::lock_guard<std::mutex> lock(corrections_mutex_);
+    if (corrections_.empty() || corrections_saved_ == corrections_received_) return;
+    corrections_saved_ = corrections_received_;
+    char line[96];
+    for (std::size_t i = 0; i < corrections_.size(); ++i) {
+      std::snprintf(line, sizeof(line), "%.6f,%.6f,%.6f\n", corrections_.stamps()[i], corrections_.corrections()[i].x(),
+                    corrections_.corrections()[i].y());
+      text += line;
+    }
+  }
+  try {
+    exocet_common::writeFileAtomically(images_dir_ + "/graph_corrections.csv", text);
+  } catch (const std::exception& e) {
+    ROS_WARN_THROTTLE(30.0, "tile writer: graph corrections not saved: %s", e.what());
+  }
+}
+
 void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic) {
   exocet_msgs::Tile msg;
   msg.header.stamp.fromSec(std::max(0.0, mosaic.end_time_s));
   msg.header.frame_id = tile.local_frame.empty() ? config_.frame_id : tile.local_frame;
   msg.index = tile.index;
+  msg.version = tile.version;
   msg.geotiff_path = tile.geotiff_path;
   msg.world_file_path = tile.world_file_path;
   msg.cog_path = tile.cog_path;
@@ -631,11 +941,20 @@ void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::C
                         error.c_str());
     }
   }
+  const std::array<Eigen::Vector2d, 4> outline = {Eigen::Vector2d(tile.min_easting_m, tile.min_northing_m),
+                                                  Eigen::Vector2d(tile.max_easting_m, tile.min_northing_m),
+                                                  Eigen::Vector2d(tile.max_easting_m, tile.max_northing_m),
+                                                  Eigen::Vector2d(tile.min_easting_m, tile.max_northing_m)};
+  const auto same = std::find_if(written_.begin(), written_.end(),
+                                 [&](const tiles::WrittenTile& w) { return w.index == tile.index; });
+  if (same != written_.end()) {  // a new version replaces the tile's footprint
+    written_outlines_[same - written_.begin()] = outline;
+    *same = tile;
+    publishFootprints();
+    return;
+  }
   written_.push_back(tile);
-  written_outlines_.push_back({Eigen::Vector2d(tile.min_easting_m, tile.min_northing_m),
-                               Eigen::Vector2d(tile.max_easting_m, tile.min_northing_m),
-                               Eigen::Vector2d(tile.max_easting_m, tile.max_northing_m),
-                               Eigen::Vector2d(tile.min_easting_m, tile.max_northing_m)});
+  written_outlines_.push_back(outline);
   if (written_.size() > kMaxFootprints) {
     written_.erase(written_.begin());
     written_outlines_.erase(written_outlines_.begin());
@@ -730,6 +1049,28 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("write failures", write_failures);
   status.add("tiles lost", dropped);
   status.add("UDP failures", udp_failures_);
+  if (config_.gain_compensation) {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    status.add("last tile gain correction", last_gain_note_.empty() ? "none yet" : last_gain_note_);
+  }
+  if (config_.keep_images) {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    status.add("images kept", images_kept_);
+    status.add("images not kept", images_not_kept_);
+    if (!config_.graph_corrections_topic.empty()) {
+      status.add("tiles drawn again", tiles_rerendered_);
+      status.add("tiles waiting to be drawn again", revision_pending_.size());
+      status.add("failures drawing a tile again", rerender_failures_);
+      status.addf("largest move of a written tile's images (m)", "%.4f", max_tile_move_m_);
+      status.addf("last drawing of a tile again (ms)", "%.0f", last_rerender_ms_);
+      if (!last_rerender_problem_.empty()) status.add("last problem drawing a tile again", last_rerender_problem_);
+    }
+  }
+  if (!config_.graph_corrections_topic.empty()) {
+    std::lock_guard<std::mutex> lock(corrections_mutex_);
+    status.add("graph corrections received", corrections_received_);
+    status.add("graph key frames", corrections_.size());
+  }
   status.add("last problem", last_problem_.empty() ? stats.last_problem : last_problem_);
   status.add("last write error", write_error);
 }

@@ -1,6 +1,7 @@
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -10,6 +11,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -697,13 +699,39 @@ std::string GeoTiffTileWriter::baseName(int index) const {
   return config_.prefix + "_" + number;
 }
 
+std::string GeoTiffTileWriter::baseName(int index, int version) const {
+  return version <= 1 ? baseName(index) : baseName(index) + "_v" + std::to_string(version);
+}
+
 int GeoTiffTileWriter::nextIndex() const {
+  // Indices of later versions (<prefix>_<NNNN>_v<K>.*) count too: their first version is gone.
+  std::set<int> versioned;
+  if (DIR* folder = ::opendir(config_.output_dir.c_str())) {
+    const std::string start = config_.prefix + "_";
+    while (const dirent* entry = ::readdir(folder)) {
+      const std::string name = entry->d_name;
+      if (name.rfind(start, 0) != 0) continue;
+      const std::string rest = name.substr(start.size());
+      std::size_t digits = 0;
+      while (digits < rest.size() && std::isdigit(static_cast<unsigned char>(rest[digits]))) ++digits;
+      if (digits >= 4 && rest.compare(digits, 2, "_v") == 0) versioned.insert(std::stoi(rest.substr(0, digits)));
+    }
+    ::closedir(folder);
+  }
   for (int index = 0;; ++index) {
     const std::string base = config_.output_dir + "/" + baseName(index);
-    bool used = false;
+    bool used = versioned.count(index) > 0;
     for (const char* extension : {".tif", ".tfw", ".cog.tif", ".kmz"}) used = used || fileExists(base + extension);
     if (!used) return index;
   }
+}
+
+int GeoTiffTileWriter::removeVersion(int index, int version) const {
+  int removed = 0;
+  const std::string base = config_.output_dir + "/" + baseName(index, version);
+  for (const char* extension : {".tif", ".tfw", ".cog.tif", ".kmz"})
+    if (::unlink((base + extension).c_str()) == 0) ++removed;
+  return removed;
 }
 
 int GeoTiffTileWriter::removeStaleTemporaries() const {
@@ -728,6 +756,24 @@ WrittenTile GeoTiffTileWriter::write(const TileRaster& raster, const TileMetadat
 }
 
 WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetadata& metadata, int index) {
+  return writeFiles(raster, metadata, index, 1);
+}
+
+WrittenTile GeoTiffTileWriter::writeVersion(const TileRaster& raster, const TileMetadata& metadata, int index,
+                                            int version) {
+  if (index < 0 || version < 2) {
+    WrittenTile tile;
+    tile.error = "writeVersion: index must be >= 0 and version >= 2 (got index " + std::to_string(index) +
+                 ", version " + std::to_string(version) + ")";
+    return tile;
+  }
+  TileMetadata versioned = metadata;
+  versioned.extra["EXOCET_TILE_VERSION"] = std::to_string(version);
+  return writeFiles(raster, versioned, index, version);
+}
+
+WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMetadata& metadata, int index,
+                                          int version) {
   const auto start = std::chrono::steady_clock::now();
   WrittenTile tile;
   tile.metadata = metadata;
@@ -759,7 +805,8 @@ WrittenTile GeoTiffTileWriter::writeAt(const TileRaster& raster, const TileMetad
   if (!S_ISDIR(st.st_mode)) return finish("output folder '" + config_.output_dir + "' is not a folder");
 
   tile.index = index >= 0 ? index : nextIndex();
-  const std::string base = baseName(tile.index);
+  tile.version = version;
+  const std::string base = baseName(tile.index, version);
   registerGdalOnce();
   GdalErrorCollector errors;
   // No .aux.xml beside the temporaries (it would not be renamed), the JPEG mask inside the file, overview blocks as

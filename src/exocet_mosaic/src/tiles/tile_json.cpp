@@ -34,6 +34,7 @@ std::string tileToJson(const WrittenTile& tile) {
   json["ok"] = tile.ok;
   json["error"] = tile.error.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(tile.error);
   json["index"] = tile.index;
+  json["tile_version"] = tile.version;
   json["geotiff_path"] = pathOrNull(tile.geotiff_path);
   json["world_file_path"] = pathOrNull(tile.world_file_path);
   json["cog_path"] = pathOrNull(tile.cog_path);

@@ -33,6 +33,9 @@ struct ComposerConfig {
   /// Compose an image only when its footprint moved by more than this fraction of the image's smaller side since the
   /// last composed image, [0, 1] (0: every image).
   double min_key_frame_shift_fraction = 0.1;
+  /// Hand the composed images out with the closed mosaic (ClosedMosaic::images), for tiles drawn again later at other
+  /// poses; they count in the open mosaic's memory.
+  bool keep_composed_images = false;
   std::string anchor = "similarity";  ///< (geometric) local -> UTM fit: "similarity" | "translation"
   /// (geometric) Prior sigma of the fit's scale change and rotation (dimensionless / rad), [1e-6, 10]: the chain's
   /// scale and heading come from the first pose (altitude ~1-2 %, heading ~1 deg); over a tile shorter than a few

@@ -59,6 +59,18 @@ struct ComposerFrame {
   std::optional<CameraGroundPose> pose;  ///< fused pose at this image; empty = not available
 };
 
+/// An image of a closed mosaic as it was drawn (undistorted, lighting-corrected) and where.
+struct ComposedImage {
+  int index = -1;      ///< frame number
+  double stamp_s = 0;  ///< acquisition time (s)
+  cv::Mat image;       ///< CV_8UC3 or CV_8UC1, the mosaic's channels
+  /// Image px -> ground (E - ground_origin E, N - ground_origin N) in metres, as the tile placed it.
+  cv::Matx33d ground_from_px = cv::Matx33d::eye();
+  /// Where the image's own fused pose puts its centre (same ground frame); empty when it had no pose or its pose was
+  /// left out of the tile's fit (an outlier).
+  std::optional<Eigen::Vector2d> navigation_m;
+};
+
 /// A closed, geo-referenced mosaic.
 struct ClosedMosaic {
   cv::Mat image;  ///< CV_8UC3 (or CV_8UC1 if the inputs were grey), north-up: x east, y south
@@ -75,6 +87,10 @@ struct ClosedMosaic {
   double anchor_sigma_m = 0;  ///< 1-sigma (per axis) of the tile's global position after that fit
   bool resampled = false;     ///< the fit's rotation/scale were applied by resampling
   std::string blend;          ///< blending actually used
+  /// With ComposerConfig::keep_composed_images: the images drawn into the tile, in order, so that the tile can be
+  /// drawn again at other poses (tiles that follow a pose graph, re-composition after the dive).
+  std::vector<ComposedImage> images;
+  Eigen::Vector2d ground_origin_en_m = Eigen::Vector2d::Zero();  ///< UTM origin of the images' ground_from_px
 };
 
 /// Counters and state of the composer, for diagnostics.

@@ -136,6 +136,8 @@ class FusionFrontEnd {
   // ---- Lookups ----
   /// Attitude of base_link at a stamp: the attitude sensor's, else the navigation's; empty when neither covers it.
   std::optional<Eigen::Quaterniond> attitudeAt(double stamp_s) const;
+  /// Stamp of the newest attitude sample (IMU or navigation); empty when none arrived.
+  std::optional<double> newestAttitudeStamp() const;
   /// The view (attitude, camera height and its sigma) of an image at `stamp_s` for a camera mounted at
   /// `base_from_camera`, from the sensors' attitude (fitted over the view window when one is set); empty when the
   /// attitude or the height is unknown.

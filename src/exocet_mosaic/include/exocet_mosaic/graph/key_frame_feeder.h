@@ -13,9 +13,12 @@
  * summed: the displacement (world east/north) turned into A's axes by A's yaw, its covariance turned likewise (the
  * images' covariances add: each pair's registration error is independent), plus a floor per key frame for what the
  * metric conversion leaves out (the seabed's relief under the images); the yaw change is the sum of the images' yaw
- * changes with image_yaw_sigma_rad per pair. A registration failure leaves no odometry across it: the next image
- * starts a key frame tied to the last one by a weak odometry (gap_sigma_m, gap_yaw_sigma_rad) from the fused
- * positions, so that the graph stays connected and the fixes decide where it lies.
+ * changes with image_yaw_sigma_rad per pair. A registration failure (or an image the fusion could not convert: no
+ * attitude, no height) leaves no image odometry across it: the next image starts a key frame tied to the last one by
+ * the fused navigation's displacement between them, with the 1-sigma of the navigation's relative error over the gap
+ * (gap_sigma_m + gap_drift_mps * its duration, gap_yaw_sigma_rad). A loose tie (a metre) let the part of the graph
+ * after a one-second gap float on the fixes alone (0.5 m USBL: 0.2 m off on the tiles benchmark dive) while the
+ * filter, across the same second, moved by its dead reckoning within centimetres.
  */
 #pragma once
 
@@ -37,8 +40,12 @@ struct KeyFrameFeederConfig {
   double keyframe_max_interval_s = 2.0;   ///< or the time since the last key frame (0, 3600] s
   double image_yaw_sigma_rad = 0.002;     ///< 1-sigma of one image pair's yaw change (0, 1] rad
   double odometry_floor_m = 0.002;        ///< 1-sigma added to each key-frame odometry, per axis [0, 10] m
-  double gap_sigma_m = 1.0;               ///< 1-sigma of the odometry across a registration failure (0, 1000] m
-  double gap_yaw_sigma_rad = 0.2;         ///< and of its yaw (0, 10] rad
+  /// 1-sigma of the fused displacement across a registration failure, per axis (0, 1000] m: the filter's jumps at
+  /// its fixes (a 0.5 m USBL fix moves a 7 cm filter by ~1 cm)...
+  double gap_sigma_m = 0.05;
+  /// ...plus its dead reckoning's drift over the gap's duration [0, 100] m/s (a DVL: ~1 % of 0.5 m/s, taken 10x).
+  double gap_drift_mps = 0.05;
+  double gap_yaw_sigma_rad = 0.2;  ///< of its yaw (0, 10] rad
   std::string validate() const;
 };
 
@@ -78,11 +85,12 @@ class KeyFrameFeeder {
                                         double sensor_yaw_sigma_rad = 0.02);
 
   /**
-   * @brief A pair the registration could not measure, ending at `stamp_s`, where the fusion put the camera at
-   * `fused_en_m` with yaw `fused_yaw_rad`: the next key frame is made here, tied by the gap's weak odometry.
+   * @brief A pair the registration could not measure, ending at `stamp_s`: the next key frame is made here, tied to
+   * the last one by the fused navigation's displacement since it (`fused_displacement_en_m`: the fused camera
+   * position now minus the fused position at the last key frame) and the yaw `fused_yaw_rad`.
    * @return the id of that key frame
    */
-  int64_t addImageFailure(double stamp_s, const Eigen::Vector2d& fused_en_m, double fused_yaw_rad);
+  int64_t addImageFailure(double stamp_s, const Eigen::Vector2d& fused_displacement_en_m, double fused_yaw_rad);
 
   /// A position fix of the camera (USBL moved to the camera), at its measurement time.
   void addPositionFix(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);

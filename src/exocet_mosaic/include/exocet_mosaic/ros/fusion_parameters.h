@@ -80,6 +80,9 @@ struct FusionNodeConfig {
   /// With pose_graph: each published state again, moved by the graph's correction at the latest solved key frame
   /// (graph pose - the filter's position there), for a tile writer that follows the graph.
   std::string graph_odometry_topic = "/mosaic/odometry_graph";
+  /// With pose_graph: exocet_msgs/PositionCorrections after each solve (graph pose - the filter's position at every
+  /// key frame), for a tile writer that draws its tiles again where the graph moved their images.
+  std::string graph_corrections_topic = "/mosaic/graph_corrections";
   /// With pose_graph: look for loops live (graph::LoopCloser: the key frames' images from loop_image_topic, the
   /// candidates whose footprints may overlap, verified by registration, added to the graph in a worker thread).
   bool loop_closure = false;

@@ -20,6 +20,7 @@
 #include <exocet_msgs/Depth.h>
 #include <exocet_msgs/GeoDatum.h>
 #include <exocet_msgs/ImageMotion.h>
+#include <exocet_msgs/PositionCorrections.h>
 #include <exocet_msgs/SetInitialPose.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
@@ -138,7 +139,8 @@ class FusionRos {
   std::unique_ptr<graph::BackgroundPoseGraph> graph_;
   std::unique_ptr<graph::KeyFrameFeeder> feeder_;
   std::optional<double> graph_last_yaw_rad_;
-  ros::Publisher graph_path_pub_, graph_odometry_pub_;
+  ros::Publisher graph_path_pub_, graph_odometry_pub_, graph_corrections_pub_;
+  std::shared_ptr<const graph::GraphSnapshot> last_corrections_snapshot_;  ///< last sent on graph_corrections_pub_
   std::map<int64_t, Eigen::Vector2d> key_frame_filter_en_m_;  ///< the filter's position when each key frame was made
   /// The graph's correction (graph pose - filter position) at the latest solved key frame at or before `stamp_s`.
   std::optional<Eigen::Vector2d> graphCorrectionAt(double stamp_s) const;

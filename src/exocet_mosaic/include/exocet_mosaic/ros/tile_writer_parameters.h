@@ -52,6 +52,20 @@ struct TileWriterNodeConfig {
   double exit_when_idle_s = 0;    ///< > 0: flush and shut down after this many wall seconds without input (replays)
   int max_failed_tiles_kept = 2;  ///< closed mosaics kept in memory for a retry after a write failure
   double retry_period_s = 10.0;
+  // Tiles that follow the pose graph.
+  /// exocet_msgs/PositionCorrections of the fusion's pose graph; empty: the tiles stay as written. When set, each
+  /// image is placed at the fused pose plus the graph's correction at its time, and a written tile is drawn again
+  /// (a new version) when the corrections move its images by more than rerender_threshold_gsd.
+  std::string graph_corrections_topic;
+  double rerender_threshold_gsd = 0.5;  ///< in ground sample distances, [0.05, 1000]
+  double rerender_period_s = 1.0;       ///< wall seconds between two looks at the written tiles, [0.05, 600]
+  /// Keep each tile's images (as drawn, JPEG) and its record in <output_dir>/.exocet_images/, for the tiles drawn
+  /// again and recompose_tiles after the dive. Forced on by graph_corrections_topic.
+  bool keep_images = true;
+  int kept_image_quality = 95;  ///< JPEG quality of the kept images, [50, 100]
+  /// Gains of each new tile matched to the tiles already written where they overlap (compose::TileGainCompensator);
+  /// a tile drawn again keeps its gains.
+  bool gain_compensation = true;
 };
 
 /// @throws std::invalid_argument naming the parameter, its value and its allowed range.

@@ -8,12 +8,21 @@
  *
  * Tiles are written by a worker thread so that a slow disk does not hold the images back; a failed write (full or
  * unwritable disk) is reported and retried, the node keeps composing; at shutdown the open mosaic is flushed.
+ *
+ * With ~graph_corrections_topic (the fusion's pose graph), each image is placed at its fused pose plus the graph's
+ * correction at its time, and a third thread (at a lower CPU priority than the chain) draws a written tile again
+ * from its kept images (tiles::renderTileAt) when the corrections have moved them by more than
+ * ~rerender_threshold_gsd; the writer thread writes it as the tile's next version, removes the previous one once the
+ * new one is complete, and announces it like a new tile (Tile message with its version, UDP, footprints). At
+ * shutdown the tiles are brought to the last corrections received.
  */
 #pragma once
 
 #include <array>
 #include <condition_variable>
 #include <deque>
+#include <map>
+#include <set>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -25,6 +34,7 @@
 #include <dynamic_reconfigure/server.h>
 #include <exocet_msgs/GeoDatum.h>
 #include <exocet_msgs/ImageMotion.h>
+#include <exocet_msgs/PositionCorrections.h>
 #include <image_transport/image_transport.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
@@ -35,11 +45,13 @@
 
 #include "exocet_mosaic/TileWriterConfig.h"
 #include "exocet_mosaic/compose/mosaic_composer.h"
+#include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/registration/image_undistorter.h"
 #include "exocet_mosaic/ros/frame_assembler.h"
 #include "exocet_mosaic/ros/tile_writer_parameters.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
+#include "exocet_mosaic/tiles/tile_revisions.h"
 
 namespace exocet_mosaic {
 
@@ -54,6 +66,8 @@ class TileWriterRos {
   struct PendingTile {
     compose::ClosedMosaic mosaic;
     int attempts = 0;
+    std::vector<Eigen::Vector2d> image_corrections_m;  ///< the graph correction in each image's pose (mosaic.images)
+    std::optional<tiles::RevisedTile> revision;        ///< a written tile drawn again (mosaic holds its summary)
   };
 
   void onImage(const sensor_msgs::ImageConstPtr& msg);
@@ -63,6 +77,7 @@ class TileWriterRos {
   void onCameraHeight(const sensor_msgs::RangeConstPtr& msg);
   void onDatum(const exocet_msgs::GeoDatumConstPtr& msg);
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg);
+  void onCorrections(const exocet_msgs::PositionCorrectionsConstPtr& msg);
   void onReconfigure(exocet_mosaic::TileWriterConfig& config, uint32_t level);
   bool onFlush(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool acceptTransport(const std::string& transport);
@@ -75,6 +90,17 @@ class TileWriterRos {
   void processReady(std::vector<AssembledFrame> frames);
   void compose(const AssembledFrame& frame);
   void enqueue(compose::ClosedMosaic mosaic);
+  /// The closed mosaic with the graph corrections its images were placed with (pruned from used_corrections_).
+  PendingTile pendingTile(compose::ClosedMosaic mosaic);
+  /// Writer thread, write_mutex_ not held: keeps the new tile's images and record on disk (keep_images).
+  std::optional<tiles::TileRecord> keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
+                                              const tiles::GeoTiffTileWriter& writer);
+  /// Writer thread, write_mutex_ not held: writes a revision, removes the previous version, announces it.
+  void writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter* writer, std::unique_lock<std::mutex>& lock);
+  void rerenderLoop();
+  /// Draws again the written tiles the corrections moved and queues them for the writer; returns how many.
+  int rerenderDue();
+  void saveCorrections();
   void flushAll(const std::string& reason);
   void writerLoop();
   void publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic);
@@ -138,8 +164,28 @@ class TileWriterRos {
   std::unique_ptr<tiles::GeoTiffTileWriter> writer_;
   std::optional<tiles::TileWriterConfig> files_update_;  ///< from dynamic_reconfigure, for the next write
   std::unique_ptr<tiles::TileNotifier> notifier_;
+  compose::TileGainCompensator gains_;  ///< writer thread only
+  std::string last_gain_note_;         ///< the last tile's gain correction, for /diagnostics (write_mutex_)
   std::vector<tiles::WrittenTile> written_;  ///< for the footprints (bounded)
   std::vector<std::array<Eigen::Vector2d, 4>> written_outlines_;
+
+  // Tiles that follow the pose graph.
+  ros::Subscriber corrections_sub_;
+  std::string images_dir_;  ///< <output_dir>/.exocet_images (keep_images)
+  std::mutex corrections_mutex_;
+  tiles::PositionCorrectionTrack corrections_;
+  std::int64_t corrections_received_ = 0, corrections_saved_ = 0;
+  std::map<int, Eigen::Vector2d> used_corrections_;  ///< frame index -> correction added to its pose (compose thread)
+  std::map<int, tiles::TileRecord> records_;         ///< written tiles by index (write_mutex_)
+  std::set<int> revision_pending_;                    ///< tiles drawn again, not written yet (write_mutex_)
+  std::map<int, std::int64_t> revision_failed_at_;    ///< tile -> corrections_received_ when drawing it failed
+  std::mutex rerender_mutex_;
+  std::condition_variable rerender_cv_;
+  bool stop_rerender_ = false;
+  std::thread rerender_thread_;
+  std::int64_t tiles_rerendered_ = 0, rerender_failures_ = 0, images_kept_ = 0, images_not_kept_ = 0;
+  double last_rerender_ms_ = 0, max_tile_move_m_ = 0;
+  std::string last_rerender_problem_;
 
   // Counters for /diagnostics.
   std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;

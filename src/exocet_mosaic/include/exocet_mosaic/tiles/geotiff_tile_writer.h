@@ -52,8 +52,8 @@ class GeoTiffTileWriter {
 
   const TileWriterConfig& config() const { return config_; }
 
-  /// Next free index: the first index none of whose final names (.tif, .tfw, .cog.tif, .kmz) exists in output_dir,
-  /// so that a restart never overwrites a tile.
+  /// Next free index: the first index none of whose final names (.tif, .tfw, .cog.tif, .kmz, of any version) exists
+  /// in output_dir, so that a restart never overwrites a tile.
   int nextIndex() const;
 
   /**
@@ -71,14 +71,26 @@ class GeoTiffTileWriter {
   /// names exists (the rename never replaces a file).
   WrittenTile writeAt(const TileRaster& raster, const TileMetadata& metadata, int index);
 
+  /**
+   * @brief A new version (>= 2) of tile `index`, drawn again (e.g. its images moved by a pose graph): written as
+   * writeAt() does under baseName(index, version), EXOCET_TILE_VERSION in its metadata. The previous version's files
+   * are not touched: removeVersion() them once the new one is announced.
+   */
+  WrittenTile writeVersion(const TileRaster& raster, const TileMetadata& metadata, int index, int version);
+  /// Removes the final files of one version of a tile (those that exist); returns how many it removed.
+  int removeVersion(int index, int version) const;
+
   /// Removes the temporaries left in output_dir by a killed writer of this prefix (".<prefix>_*.partial*"); call it
   /// at start-up, when no other writer of this folder and prefix runs. Returns how many files it removed.
   int removeStaleTemporaries() const;
 
   /// Final file names (no folder) of tile `index`: "<prefix>_<NNNN>" + ".tif" / ".tfw" / ".cog.tif" / ".kmz".
   std::string baseName(int index) const;
+  /// Of version `version` of tile `index`: baseName(index) for version 1 (or less), "<prefix>_<NNNN>_v<version>" after.
+  std::string baseName(int index, int version) const;
 
  private:
+  WrittenTile writeFiles(const TileRaster& raster, const TileMetadata& metadata, int index, int version);
   TileWriterConfig config_;
 };
 

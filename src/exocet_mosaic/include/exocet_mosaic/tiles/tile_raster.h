@@ -52,6 +52,7 @@ struct WrittenTile {
   bool ok = false;
   std::string error;         ///< what failed, with the path and the OS / GDAL message (e.g. "No space left on device")
   int index = -1;            ///< tile index NNNN of the names <prefix>_<NNNN>.*
+  int version = 1;           ///< 1, then 2, 3... when the tile is drawn again (names <prefix>_<NNNN>_v<version>.*)
   std::string geotiff_path;  ///< <output_dir>/<prefix>_<NNNN>.tif
   std::string world_file_path;  ///< <output_dir>/<prefix>_<NNNN>.tfw, empty when not written
   std::string cog_path;         ///< <output_dir>/<prefix>_<NNNN>.cog.tif, empty when not written

@@ -1,0 +1,133 @@
+/**
+ * @file tile_revisions.h
+ * @brief Tiles that follow the pose graph: what a written tile is made of (its images on disk and where it drew
+ * them), the graph's position corrections over time, how far they move a tile's images, and the tile drawn again at
+ * them, per image. The live tile writer draws a tile again when its images moved by more than half a ground sample
+ * distance; recompose_tiles draws every tile of a dive at the final graph. No ROS in it.
+ *
+ * Each image keeps the shape the registration chain gave it inside its tile; it is moved by the change of the
+ * graph's correction at its own time (not one shift per tile), so that a tile crossed by a loop closure bends with
+ * the graph.
+ */
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "exocet_mosaic/compose/placed_image_renderer.h"
+#include "exocet_mosaic/tiles/tile_raster.h"
+
+namespace exocet_mosaic {
+namespace tiles {
+
+/// The pose graph's corrections of the fused positions (graph key frame minus the filter there) over time.
+class PositionCorrectionTrack {
+ public:
+  /// Replaces the track. Pairs whose stamp does not increase or whose values are not finite are left out.
+  /// @return how many pairs were left out
+  int set(const std::vector<double>& stamps_s, const std::vector<Eigen::Vector2d>& corrections_m);
+  /// Linear interpolation in time; the nearest end outside the track; zero for an empty track.
+  Eigen::Vector2d at(double stamp_s) const;
+  bool empty() const { return stamps_s_.empty(); }
+  std::size_t size() const { return stamps_s_.size(); }
+  const std::vector<double>& stamps() const { return stamps_s_; }
+  const std::vector<Eigen::Vector2d>& corrections() const { return corrections_m_; }
+
+ private:
+  std::vector<double> stamps_s_;
+  std::vector<Eigen::Vector2d> corrections_m_;
+};
+
+/// One image of a written tile.
+struct RecordedImage {
+  int frame = -1;
+  double stamp_s = 0;
+  std::string file;  ///< image file name in the tile records' folder (JPEG, as drawn)
+  int width_px = 0, height_px = 0;
+  /// Image px -> ground (E - origin E, N - origin N) in metres, as the tile's first version drew it (the chain's
+  /// placement, fitted to the navigation at close).
+  cv::Matx33d closed_ground_from_px = cv::Matx33d::eye();
+  Eigen::Vector2d closed_correction_m = Eigen::Vector2d::Zero();  ///< the graph's correction in the pose then
+  /// Where the image's fused pose put its centre then (same ground frame, the correction included); none: no pose.
+  std::optional<Eigen::Vector2d> closed_navigation_m;
+  cv::Matx33d ground_from_px = cv::Matx33d::eye();  ///< as the tile's current version drew it
+};
+
+/// What a written tile is made of.
+struct TileRecord {
+  int index = -1;
+  int version = 1;
+  Eigen::Vector2d ground_origin_en_m = Eigen::Vector2d::Zero();
+  double gsd_m = 0;
+  int utm_zone = 0;
+  bool northern_hemisphere = true;
+  std::string local_frame;  ///< TileRaster::local_frame
+  TileMetadata metadata;
+  std::vector<RecordedImage> images;
+};
+
+/// The record as JSON (the tile writer keeps one file per tile beside the images).
+nlohmann::json tileRecordToJson(const TileRecord& record);
+/// @throws std::invalid_argument naming the missing or bad field.
+TileRecord tileRecordFromJson(const nlohmann::json& json);
+
+/// The name a composed image is kept under: "<prefix>_<stamp ns>.jpg" (unique across restarts of the writer).
+std::string recordedImageName(const std::string& prefix, double stamp_s);
+
+/**
+ * @brief Writes `image` (CV_8UC1 / CV_8UC3) as JPEG of `jpeg_quality` [50, 100] to `folder`/`name`, atomically.
+ * @return empty on success, otherwise what failed (the path and the OS error, e.g. a full disk)
+ */
+std::string writeRecordedImage(const std::string& folder, const std::string& name, const cv::Mat& image,
+                               int jpeg_quality);
+
+/// How a tile is placed again at the graph's corrections.
+struct RevisionConfig {
+  /// 1-sigma of an image's navigation target (m): weighs the targets against the priors below, (0, 10].
+  double target_sigma_m = 0.01;
+  double scale_prior_sigma = 0.01;     ///< prior 1-sigma of the tile's scale change, (0, 1]
+  double rotation_prior_sigma = 0.01;  ///< and of its rotation (rad), (0, 1]
+  /// Each image's residual after the tile's similarity is averaged over this many neighbouring images (odd, [1,
+  /// 101]) and applied to it: the tile bends with the graph without taking each pose's noise; 0: the similarity only.
+  int residual_window_images = 5;
+  std::string validate() const;
+};
+
+/**
+ * @brief Where the images of the tile go at the track's corrections: the chain's placement of each image (as at
+ * close) moved by the similarity that best carries their centres onto their navigation targets (each image's fused
+ * centre at close, moved by the change of the graph's correction at its time; priors on scale and rotation; a second
+ * pass without the targets beyond 3 median residuals), then by its neighbours' mean residual. An image without a
+ * target follows the similarity. No target at all: each image moves by its own correction change.
+ * @return one ground_from_px per image (the record's order)
+ */
+std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCorrectionTrack& track,
+                                      const RevisionConfig& config = RevisionConfig());
+
+/// Largest move (m) of the tile's image corners from where its current version drew them to placementsAt().
+double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack& track,
+                         const RevisionConfig& config = RevisionConfig());
+
+/// A tile drawn again.
+struct RevisedTile {
+  TileRaster raster;       ///< empty image when nothing could be drawn
+  TileRecord record;       ///< the record of the new drawing (version + 1, current placements updated)
+  double moved_max_m = 0;  ///< largest image corner move
+  int images_missing = 0;  ///< images that could not be read (left out)
+  std::string problem;     ///< the last problem met, empty if none
+};
+
+/**
+ * @brief Draws the tile at placementsAt(), the images read from `images_dir`, on the same GSD grid.
+ * @param render blending; its gsd_m is replaced by the record's.
+ */
+RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
+                         compose::PlacedImageRenderConfig render, const RevisionConfig& config = RevisionConfig());
+
+}  // namespace tiles
+}  // namespace exocet_mosaic
