@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <map>
 #include <regex>
 #include <sstream>
 
@@ -328,16 +329,23 @@ std::string TileAdjustmentConfig::validate() const {
 }
 
 std::vector<std::string> listTiles(const std::string& folder, std::string* error) {
-  std::vector<std::string> paths;
+  // <prefix>_<NNNN>.tif, or <prefix>_<NNNN>_v<K>.tif for a tile drawn again: the highest version of each tile.
+  std::map<std::string, std::pair<int, std::string>> newest;  // "<prefix>_<NNNN>" -> (version, path)
   std::error_code ec;
-  const std::regex tile_name(R"([A-Za-z0-9_.\-]+_[0-9]{4,}\.tif)");
+  const std::regex tile_name(R"(([A-Za-z0-9_.\-]+_[0-9]{4,})(_v([0-9]+))?\.tif)");
   for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
     const std::string name = entry.path().filename().string();
-    if (entry.is_regular_file() && name[0] != '.' && std::regex_match(name, tile_name) &&
-        name.find(".cog.tif") == std::string::npos)
-      paths.push_back(entry.path().string());
+    std::smatch match;
+    if (!entry.is_regular_file() || name[0] == '.' || name.find(".cog.tif") != std::string::npos ||
+        !std::regex_match(name, match, tile_name))
+      continue;
+    const int version = match[3].matched ? std::stoi(match[3].str()) : 1;
+    auto& best = newest[match[1].str()];
+    if (best.second.empty() || version > best.first) best = {version, entry.path().string()};
   }
   if (ec && error) *error = "cannot list '" + folder + "': " + ec.message();
+  std::vector<std::string> paths;
+  for (const auto& [base, tile] : newest) paths.push_back(tile.second);
   std::sort(paths.begin(), paths.end());
   return paths;
 }

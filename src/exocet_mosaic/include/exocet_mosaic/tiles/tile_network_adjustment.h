@@ -88,8 +88,9 @@ struct TileAdjustmentResult {
   std::vector<std::string> written;   ///< paths of the adjusted GeoTIFFs
 };
 
-/// The tiles of a folder as the tile writer names them (<prefix>_NNNN.tif, not the .cog.tif copies), sorted; empty
-/// when there are none or the folder cannot be read (*error says why, if given).
+/// The tiles of a folder as the tile writer names them (<prefix>_NNNN.tif, or the highest <prefix>_NNNN_v<K>.tif of a
+/// tile drawn again; not the .cog.tif copies), sorted; empty when there are none or the folder cannot be read (*error
+/// says why, if given).
 std::vector<std::string> listTiles(const std::string& folder, std::string* error = nullptr);
 
 /**

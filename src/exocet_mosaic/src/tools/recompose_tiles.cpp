@@ -1,0 +1,180 @@
+// recompose_tiles: after the dive, draws every tile again from its images at the pose graph's final corrections
+// (tiles/tile_revisions.h: each image placed by its tile's chain, carried onto the graph per image), with the tiles'
+// gains matched in one pass over the dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
+// last graph corrections it received (graph_corrections.csv there, or --corrections). The live tiles are kept.
+//   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
+// Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "exocet_common/command_line.h"
+#include "exocet_common/json_file.h"
+#include "exocet_mosaic/compose/tile_gain_compensator.h"
+#include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_revisions.h"
+
+namespace {
+
+namespace et = exocet_mosaic::tiles;
+namespace ec = exocet_mosaic::compose;
+
+int badInput(const std::string& why) {
+  std::cerr << "recompose_tiles: " << why << "\n";
+  return exocet_common::kExitBadInput;
+}
+
+/// stamp_s,east_m,north_m with a header line; throws naming the line.
+et::PositionCorrectionTrack readCorrections(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::invalid_argument("cannot read the corrections '" + path + "'");
+  std::string line;
+  std::getline(in, line);
+  if (line.rfind("stamp_s,east_m,north_m", 0) != 0)
+    throw std::invalid_argument("'" + path + "' does not start with the header stamp_s,east_m,north_m");
+  std::vector<double> stamps;
+  std::vector<Eigen::Vector2d> values;
+  for (int number = 2; std::getline(in, line); ++number) {
+    if (line.empty()) continue;
+    std::istringstream fields(line);
+    double t = 0, e = 0, n = 0;
+    char c1 = 0, c2 = 0;
+    if (!(fields >> t >> c1 >> e >> c2 >> n) || c1 != ',' || c2 != ',')
+      throw std::invalid_argument("'" + path + "' line " + std::to_string(number) + ": expected stamp_s,east_m,north_m");
+    stamps.push_back(t);
+    values.emplace_back(e, n);
+  }
+  et::PositionCorrectionTrack track;
+  const int left_out = track.set(stamps, values);
+  if (left_out > 0)
+    std::cerr << "recompose_tiles: " << left_out << " correction(s) not finite or not in time order: left out\n";
+  return track;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather";
+  et::RevisionConfig revision;
+  bool gain_compensation = true;
+  CLI::App app(
+      "Draws every tile of a dive again, per image, at the pose graph's final corrections: the records and images the\n"
+      "tile writer kept in DIR/.exocet_images/ (~keep_images), the corrections it last received there\n"
+      "(graph_corrections.csv) or --corrections. Tiles are written north-up on the same GSD grid, same index, into the\n"
+      "output folder (which must exist and differ from DIR), their gains matched over the whole dive in index order;\n"
+      "nothing is overwritten.",
+      "recompose_tiles");
+  app.add_option("--tiles", tiles_dir, "folder of the live tiles")->required()->check(CLI::ExistingDirectory);
+  app.add_option("--output", output_dir, "existing folder for the recomposed tiles, not the tiles' own")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--corrections", corrections_path,
+                 "graph corrections (CSV stamp_s,east_m,north_m); default DIR/.exocet_images/graph_corrections.csv")
+      ->type_name("FILE.csv");
+  app.add_option("--prefix", prefix, "file prefix of the tiles")->capture_default_str();
+  app.add_option("--blend", blend, "feather | multiband | none")->capture_default_str();
+  app.add_option("--residual-window", revision.residual_window_images,
+                 "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
+      ->capture_default_str();
+  app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
+  app.add_option("--report", report, "also write what was done as JSON")->type_name("FILE.json");
+  app.footer("Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.");
+  if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
+  const std::string invalid = revision.validate();
+  if (!invalid.empty()) return badInput(invalid);
+  if (std::filesystem::equivalent(tiles_dir, output_dir)) return badInput("--output must differ from --tiles");
+  const std::string records_dir = tiles_dir + "/.exocet_images";
+  if (corrections_path.empty()) corrections_path = records_dir + "/graph_corrections.csv";
+
+  et::PositionCorrectionTrack track;
+  try {
+    if (std::filesystem::exists(corrections_path))
+      track = readCorrections(corrections_path);
+    else
+      std::cerr << "recompose_tiles: no graph corrections (" << corrections_path
+                << "): the tiles are drawn at the fused navigation\n";
+  } catch (const std::exception& e) {
+    return badInput(e.what());
+  }
+  std::vector<et::TileRecord> records;
+  std::error_code error;
+  for (const auto& entry : std::filesystem::directory_iterator(records_dir, error)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.path().extension() != ".json" || name.rfind(prefix + "_", 0) != 0) continue;
+    const auto json = exocet_common::readJsonObjectFile<nlohmann::json>(entry.path().string());
+    if (!json) return badInput("'" + entry.path().string() + "' is not a JSON object");
+    try {
+      records.push_back(et::tileRecordFromJson(*json));
+    } catch (const std::exception& e) {
+      return badInput("'" + entry.path().string() + "': " + e.what());
+    }
+  }
+  if (error) return badInput("cannot list '" + records_dir + "': " + error.message());
+  if (records.empty())
+    return badInput("no tile record (" + prefix + "_NNNN.json) in '" + records_dir +
+                    "': was the tile writer run with ~keep_images?");
+  std::sort(records.begin(), records.end(),
+            [](const et::TileRecord& a, const et::TileRecord& b) { return a.index < b.index; });
+
+  et::TileWriterConfig files;
+  files.output_dir = output_dir;
+  files.prefix = prefix;
+  et::GeoTiffTileWriter writer(files);
+  ec::TileGainCompensator gains;
+  ec::PlacedImageRenderConfig render;
+  render.blend = blend;
+  nlohmann::ordered_json json;
+  json["tiles"] = nlohmann::ordered_json::array();
+  int written = 0, failed = 0;
+  for (et::TileRecord record : records) {
+    et::RevisedTile tile = et::renderTileAt(record, track, records_dir, render, revision);
+    if (tile.raster.image.empty()) {
+      std::cerr << "recompose_tiles: tile " << record.index << " not drawn: " << tile.problem << "\n";
+      ++failed;
+      continue;
+    }
+    ec::TileGains g;
+    if (gain_compensation) {
+      g = gains.estimate(tile.raster, record.index);
+      tile.raster = ec::TileGainCompensator::apply(tile.raster, g);
+    }
+    tile.record.metadata.extra["recomposed"] = "final pose graph, per image";
+    const et::WrittenTile out = writer.writeAt(tile.raster, tile.record.metadata, record.index);
+    if (!out.ok) {
+      std::cerr << "recompose_tiles: " << out.error << "\n";
+      ++failed;
+      continue;
+    }
+    if (gain_compensation) gains.record(record.index, tile.raster, g);
+    ++written;
+    std::printf("  %s: %zu images, moved by up to %.4f m%s\n", std::filesystem::path(out.geotiff_path).filename().c_str(),
+                record.images.size(), tile.moved_max_m,
+                tile.images_missing > 0 ? (", " + std::to_string(tile.images_missing) + " images missing").c_str() : "");
+    json["tiles"].push_back({{"index", record.index},
+                             {"images", record.images.size()},
+                             {"images_missing", tile.images_missing},
+                             {"moved_max_m", tile.moved_max_m},
+                             {"gain", {g.gain[0], g.gain[1], g.gain[2]}}});
+  }
+  std::printf("recompose_tiles: wrote %d of %zu tiles to %s (%zu graph key frames)\n", written, records.size(),
+              output_dir.c_str(), track.size());
+  if (!report.empty()) {
+    json["written"] = written;
+    json["failed"] = failed;
+    json["graph_key_frames"] = track.size();
+    try {
+      exocet_common::writeJsonFileAtomically(report, json);
+    } catch (const std::exception& e) {
+      std::cerr << "recompose_tiles: " << e.what() << "\n";
+      return 1;
+    }
+  }
+  return failed > 0 ? 1 : 0;
+}
