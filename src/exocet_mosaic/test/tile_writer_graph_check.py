@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""Feeds tile_writer_node (following the pose graph) synthetic frames of a nadir camera moving east, then graph
+corrections that move the whole dive 5 cm east: every written tile is drawn again, as version 2, 5 cm further east,
+announced on /mosaic/tile; its first version's file is gone, the new one is there; /diagnostics counts it."""
+import os
+import time
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticArray
+from exocet_msgs.msg import ImageMotion, PositionCorrections, Tile
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Image, Range
+
+from tile_writer_node_check import FOCAL_PX, GSD_M, HEIGHT, HEIGHT_M, STEP_PX, WIDTH, seabed
+
+MOVE_EAST_M = 0.05
+
+
+class TileWriterGraphTest(unittest.TestCase):
+
+    def test_tiles_follow_the_graph(self):
+        rospy.init_node('tile_writer_graph_check')
+        tiles, statuses = [], []
+        rospy.Subscriber('/mosaic/tile', Tile, tiles.append, queue_size=100)
+        rospy.Subscriber('/diagnostics', DiagnosticArray,
+                         lambda msg: statuses.extend(s for s in msg.status if 'tile' in s.name), queue_size=100)
+        images = rospy.Publisher('/camera/image_raw', Image, queue_size=100)
+        motions = rospy.Publisher('/mosaic/motion', ImageMotion, queue_size=100)
+        odometry = rospy.Publisher('/mosaic/odometry', Odometry, queue_size=100)
+        heights = rospy.Publisher('/mosaic/camera_height', Range, queue_size=100)
+        corrections = rospy.Publisher('/mosaic/graph_corrections', PositionCorrections, queue_size=1, latch=True)
+        deadline = time.time() + 20.0
+        while time.time() < deadline and (images.get_num_connections() == 0 or motions.get_num_connections() == 0
+                                          or odometry.get_num_connections() == 0
+                                          or corrections.get_num_connections() == 0):
+            time.sleep(0.1)
+        texture = seabed()
+        start = rospy.Time(1000.0)
+        previous = None
+        frames = 32
+        for i in range(frames):
+            stamp = start + rospy.Duration(0.2 * i)
+            image = Image()
+            image.header.stamp = stamp
+            image.header.frame_id = 'camera_optical'
+            image.height, image.width, image.encoding, image.step = HEIGHT, WIDTH, 'mono8', WIDTH
+            image.data = texture[20:20 + HEIGHT, i * STEP_PX:i * STEP_PX + WIDTH].tobytes()
+            images.publish(image)
+            if previous is not None:
+                motion = ImageMotion()
+                motion.header.stamp = stamp
+                motion.previous_stamp = previous
+                motion.method, motion.model = 'klt', 'translation'
+                motion.matrix = [1, 0, -STEP_PX, 0, 1, 0, 0, 0, 1]
+                motion.camera_matrix = [FOCAL_PX, 0, WIDTH / 2.0, 0, FOCAL_PX, HEIGHT / 2.0, 0, 0, 1]
+                motion.parameters, motion.covariance = [-STEP_PX, 0.0], [0.01, 0, 0, 0.01]
+                motions.publish(motion)
+            pose = Odometry()
+            pose.header.stamp = stamp
+            pose.header.frame_id = 'utm'
+            pose.pose.pose.position.x = 500000.0 + i * STEP_PX * GSD_M
+            pose.pose.pose.position.y = 4700000.0
+            pose.pose.pose.orientation.x, pose.pose.pose.orientation.w = 1.0, 0.0
+            pose.pose.covariance[0] = pose.pose.covariance[7] = 0.01
+            odometry.publish(pose)
+            height = Range()
+            height.header.stamp = stamp
+            height.range = HEIGHT_M
+            heights.publish(height)
+            previous = stamp
+            time.sleep(0.02)
+        deadline = time.time() + 20.0
+        while time.time() < deadline and len(tiles) < 2:
+            time.sleep(0.1)
+        first = {t.index: t for t in tiles if t.version == 1}
+        self.assertGreaterEqual(len(first), 2, 'tiles written before the graph moves them')
+
+        # The graph now puts the whole dive 5 cm further east.
+        msg = PositionCorrections()
+        msg.header.frame_id = 'utm'
+        msg.stamps = [start, start + rospy.Duration(0.2 * frames)]
+        msg.east_m, msg.north_m = [MOVE_EAST_M] * 2, [0.0] * 2
+        msg.header.stamp = msg.stamps[-1]
+        corrections.publish(msg)
+        deadline = time.time() + 30.0
+        redrawn = {}
+        while time.time() < deadline and not all(i in redrawn for i in first):
+            redrawn = {t.index: t for t in list(tiles) if t.version == 2}
+            time.sleep(0.1)
+        for index, old in first.items():
+            self.assertIn(index, redrawn, 'tile %d drawn again within 30 s' % index)
+            new = redrawn[index]
+            self.assertTrue(new.geotiff_path.endswith('_v2.tif'), new.geotiff_path)
+            self.assertTrue(os.path.exists(new.geotiff_path), new.geotiff_path)
+            self.assertFalse(os.path.exists(old.geotiff_path), 'the first version goes once the second exists')
+            # Moved east by the correction, within a pixel (the grid stays on multiples of the GSD).
+            self.assertAlmostEqual(new.min_easting_m - old.min_easting_m, MOVE_EAST_M, delta=1.01 * new.gsd_m)
+            self.assertAlmostEqual(new.min_northing_m, old.min_northing_m, delta=1.01 * new.gsd_m)
+            self.assertEqual(new.first_frame, old.first_frame)
+        deadline = time.time() + 10.0
+        counted = 0
+        while time.time() < deadline and counted < len(first):
+            for s in list(statuses):
+                values = {kv.key: kv.value for kv in s.values}
+                counted = max(counted, int(values.get('tiles drawn again', 0)))
+            time.sleep(0.2)
+        self.assertGreaterEqual(counted, len(first), '/diagnostics counts the tiles drawn again')
+
+
+if __name__ == '__main__':
+    rostest.rosrun('exocet_mosaic', 'tile_writer_graph', TileWriterGraphTest)
