@@ -34,7 +34,7 @@ test: build
 	@tools/make-bags.sh sample_out_and_back
 	@tools/run-tests.sh
 
-# The fast tier: every gtest and the build checks' tests (no rostest, no bag); the same closing line.
+# The fast tier: every gtest, the build checks' and the Python unit tests (no rostest, no bag); the same closing line.
 check: build
 	@tools/run-tests.sh --gtest-only
 

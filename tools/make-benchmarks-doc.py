@@ -383,16 +383,20 @@ BENCHMARKS = {
     },
     'tiles.json': {
         'title': 'Live mosaicking chain and GeoTIFF tiles',
-        'command': 'devel/lib/exocet_mosaic/bench_tiles --output-dir out/bench [--dives pal,hd] [--pal-rate R] '
-                   '[--hd-rate R] [--attempts N]',
+        'command': 'devel/lib/exocet_mosaic/bench_tiles --output-dir out/bench [--dives pal,hd,grid] '
+                   '[--graph-modes off,on] [--pal-rate R] [--hd-rate R] [--grid-rate R] [--attempts N]',
         'measures': 'Throughput, latency and memory of the live chain (registration_node -> fusion_node -> '
                     'tile_writer_node, as `src/exocet_mosaic/launch/replay.launch` runs it) on a replayed dive, and the geometric '
-                    'quality of the GeoTIFF tiles it writes, before and after `adjust_tiles`.',
-        'data': 'Two simulated dives with surveyed checker targets (0.3 m), JPEG images, USBL 0.5 m at 1 Hz '
+                    'quality and the colour agreement of the GeoTIFF tiles it writes, before and after `adjust_tiles`; '
+                    'each dive replayed without and with the fusion\'s pose graph (`pose_graph:=true`).',
+        'data': 'Three simulated dives with surveyed checker targets (0.3 m), JPEG images, USBL 0.5 m at 1 Hz '
                 'arriving 1.5 s late. PAL: `src/exocet_mosaic/config/dives/bench_tiles_pal.yaml`, about 67 s at 25 frames/s, a '
                 '3-line lawnmower (8 m lines 1.6 m apart, so that tiles of one line overlap tiles of the next), 2.5 m '
                 'altitude, ten targets; presets `pal_survey`. HD: `src/exocet_mosaic/config/dives/bench_tiles_hd.yaml`, about 33 s of '
-                '1920x1080 at 25 frames/s, a 3 m line out and back, six targets; presets `hd_survey`.',
+                '1920x1080 at 25 frames/s, a 3 m line out and back, six targets; presets `hd_survey`. Grid: '
+                '`src/exocet_mosaic/config/dives/bench_tiles_grid.yaml`, about 91 s of PAL at 25 frames/s, three 3.2 m '
+                'lines 1.6 m apart then three lines across them (waypoints, turns in place), ten targets; presets '
+                '`pal_survey`.',
         'method': [
             'The dive is replayed with `rosbag play` at the goal\'s rate (8x real time for PAL, 2x for HD) on a '
             'private ROS master; after frames are dropped the rate is halved and the replay tried again (at most '
@@ -407,17 +411,29 @@ BENCHMARKS = {
             '1-sigma).',
             'Tile misalignment: the shift between two overlapping tiles on their common grid, by masked, windowed '
             'phase correlation of patches (px). Consecutive tiles share images; other overlapping pairs are return '
-            'passes, whose misalignment is the live navigation\'s error between passes. `adjusted_*`: the same '
-            'measurements on the output of `adjust_tiles`.',
+            'passes and crossings, whose misalignment is the live navigation\'s error between passes; '
+            '`overlap_misalignment_max_px` (top level `<dive>_live_overlap_max_px`) is the largest over every pair. '
+            '`adjusted_*`: the same measurements on the output of `adjust_tiles` applied to the tiles of the run '
+            'without the graph (`adjusted_*_with_graph`: to those of the run with it).',
+            'Colour agreement: each overlapping pair aligned by its measured shift (rounded to whole pixels), both '
+            'data masks eroded by 3 px, luma = OpenCV BGR to GRAY (8-bit). Level step: |mean luma of one tile - '
+            'mean luma of the other| on their common pixels, the largest over the pairs; |A-B| median: the median '
+            'absolute luma difference pooled over the common pixels of every pair (grey levels).',
+            'Graph modes: each dive is replayed with `pose_graph:=false` then `pose_graph:=true` (`--graph-modes`); '
+            'the figures of the run with the graph have the plain names, those of the run without it the suffix '
+            '`_without_graph`. `rate_no_drop` (top level `<dive>_rate_no_drop`): the replay rate at which no frame '
+            'was dropped, null when every attempt dropped frames.',
         ],
         'targets': [
             'PAL replayed at 8x real time (200 frames/s) and HD at 2x (50 frames/s) with no frame dropped.',
             'Landmark errors within the bound max(2 GSD, fused 1-sigma).',
             'After `adjust_tiles`, overlapping tiles misaligned by at most 2 px.',
         ],
-        'omit': ['dives.*.attempts', 'dives.*.landmark_observations', 'dives.*.pairs', 'dives.*.tile_list',
-                 'dives.*.tile_write_ms.*', 'dives.*.registration_lag_s', 'dives.*.fusion_lag_s',
-                 'dives.*.tiles_dir', 'dives.*.landmarks_ambiguous'],
+        'omit': ['dives.*.attempts*', 'dives.*.landmark_observations*', 'dives.*.pairs', 'dives.*.pairs_without_graph',
+                 'dives.*.tile_list*', 'dives.*.tile_write_ms', 'dives.*.tile_write_ms_without_graph',
+                 'dives.*.tile_write_ms.*', 'dives.*.tile_write_ms_without_graph.*', 'dives.*.registration_lag_s*',
+                 'dives.*.fusion_lag_s*', 'dives.*.tiles_dir*', 'dives.*.landmarks_ambiguous*',
+                 'dives.*.overlap_colour_per_pair*'],
         'groups': {'dives': 'Per dive'},
         'figures': [
             ('chain_fps*without_drops', 'no frame dropped at that rate'),
@@ -452,6 +468,23 @@ BENCHMARKS = {
             ('return_pass_misalignment_max_m', 'other overlapping pairs misaligned, max (m)'),
             ('return_pass_misalignment_patch_p95_px', 'other pairs: worst patch p95 (px)'),
             ('return_pass_pairs', 'other overlapping pairs'),
+            ('overlap_misalignment_max_px', 'every overlapping pair (consecutive, return passes, crossings) '
+                                            'misaligned, max (px)'),
+            ('overlap_misalignment_median_px', 'every overlapping pair misaligned, median (px)'),
+            ('overlap_pairs', 'overlapping pairs'),
+            ('*_live_overlap_max_px', 'live tiles: every overlapping pair misaligned, max (px)'),
+            ('*_live_landmark_p95_m', 'live tiles: landmark error, p95 (m)'),
+            ('*rate_no_drop', 'replay rate reached with no frame dropped (x real time; n/a: every attempt dropped)'),
+            ('*overlap_level_step_max_grey', 'overlapping tiles: mean luma step, max over pairs (grey levels)'),
+            ('*overlap_abs_diff_median_grey', 'overlapping tiles: |luma difference| median, pooled (grey levels)'),
+            ('overlap_colour_pairs', 'overlapping pairs compared in colour'),
+            ('overlap_colour_pixels', 'common pixels compared in colour'),
+            ('pose_graph', 'the fusion\'s pose graph ran'),
+            ('graph_modes', 'runs: off (without the pose graph), on (with it)'),
+            ('analysis_s', 'time to measure the tiles (s)'),
+            ('adjust_tiles_s', 'time to adjust (adjust_tiles) and measure the tiles (s)'),
+            ('graph_modes_from_previous_run', 'graph modes whose figures are the previous run\'s'),
+            ('adjusted_*_with_graph', 'after adjust_tiles, tiles of the run with the graph'),
             ('adjusted_tile_misalignment_px', 'after adjust_tiles: consecutive tiles, max (px; target <= 2)'),
             ('adjusted_tile_misalignment_median_px', 'after adjust_tiles: consecutive tiles, median (px)'),
             ('adjusted_return_pass_misalignment_max_px', 'after adjust_tiles: other pairs, max (px; target <= 2)'),
@@ -744,6 +777,7 @@ BENCHMARKS = {
     },
 }
 
+WITHOUT_GRAPH_SUFFIX = '_without_graph'  # a figure of a run without the pose graph: the meaning of the plain name
 MAX_INLINE_ITEMS = 12  # longer lists of numbers are summarised (the JSON file has them all)
 MAX_RECORD_ROWS = 40   # longer lists of records are summarised
 
@@ -806,6 +840,9 @@ def flatten(value, prefix, omit, out):
 
 
 def meaning(key, figures):
+    if key.endswith(WITHOUT_GRAPH_SUFFIX):  # bench_tiles: a figure of the run without the pose graph
+        text = meaning(key[:-len(WITHOUT_GRAPH_SUFFIX)], figures)
+        return text + ' (without the pose graph)' if text else ''
     for pattern, text in figures:
         if fnmatch.fnmatchcase(key, pattern):
             return text

@@ -2,8 +2,9 @@
 # Runs every gtest, rostest and whole-system test of the workspace and prints the verdict of catkin_test_results
 # (catkin_make run_tests itself exits 0 even when a test fails). Closing line: "N passed, N failed".
 #   tools/run-tests.sh               the whole suite (make test)
-#   tools/run-tests.sh --gtest-only  the fast tier (make check): every package's gtests and the build checks' tests
-#                                    (catkin's run_tests_<package>_gtest and _cmake targets); no rostest, no master
+#   tools/run-tests.sh --gtest-only  the fast tier (make check): every package's gtests, the build checks' tests and
+#                                    the Python unit tests (catkin's run_tests_<package>_gtest, _cmake and _python
+#                                    targets); no rostest, no master
 set -uo pipefail
 cd "$(dirname "$0")/.."
 mode=all
@@ -23,11 +24,11 @@ rm -rf build/test_results
 start=$(date +%s)
 if [[ $mode == gtest ]]; then
   log=out/check.log
-  # catkin's per-package targets of one test type: run_tests_<package>_gtest, run_tests_<package>_cmake.
+  # catkin's per-package targets of one test type: run_tests_<package>_gtest, _cmake, _python.
   available=$(make -s -C build help | sed -nE 's/^\.\.\. (run_tests_[A-Za-z0-9_]+)$/\1/p')
   targets=""
   for package in $(sed -nE 's|.*<name>(.*)</name>.*|\1|p' src/*/package.xml | sort -u); do
-    for type in gtest cmake; do
+    for type in gtest cmake python; do
       if grep -qx "run_tests_${package}_${type}" <<< "$available"; then targets="$targets run_tests_${package}_${type}"; fi
     done
   done

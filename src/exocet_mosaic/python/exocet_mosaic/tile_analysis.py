@@ -3,6 +3,9 @@ bench_tiles share.
 
 Needs python3-gdal and python3-opencv. Coordinates: UTM easting/northing (m); a tile's geotransform is
 [E0, gsd, 0, N0, 0, -gsd] (north-up), pixel (col, row) -> E0 + (col + 0.5) * gsd, N0 - (row + 0.5) * gsd at its centre.
+
+Tiles are numbered NAME_NNNN.tif; a tile re-rendered is NAME_NNNN_vK.tif (K >= 2), and the highest version present
+of an index is the tile (tile_paths).
 """
 import glob
 import math
@@ -19,10 +22,17 @@ gdal.UseExceptions()
 MIN_OVERLAP_PX = 96
 # A checker landmark is taken as found when the normalised correlation with a synthetic checker reaches this.
 MIN_CHECKER_SCORE = 0.6
+# Colour comparison of overlapping tiles: each tile's data mask is eroded by this many pixels first (the edge pixels
+# of a tile are blended with no-data), and a pair needs at least this many common pixels.
+OVERLAP_ERODE_PX = 3
+MIN_COLOUR_PIXELS = 1000
+# A numbered tile: NAME_NNNN.tif, or NAME_NNNN_vK.tif when re-rendered (version K >= 2; no suffix: version 1).
+TILE_NAME = re.compile(r'^(?P<prefix>.+)_(?P<index>\d{4,})(?:_v(?P<version>\d+))?\.tif$')
 
 
 class Tile:
-    """A GeoTIFF tile read back with GDAL: grey image (luminance), data mask, geotransform, EPSG, metadata."""
+    """A GeoTIFF tile read back with GDAL: grey image (luminance, float), luma (8-bit, OpenCV's BGR -> GRAY), data
+    mask, geotransform, EPSG, metadata, index and version (from the file name)."""
 
     def __init__(self, path):
         dataset = gdal.Open(path)
@@ -46,15 +56,21 @@ class Tile:
         if len(colour) >= 3:
             # Bands in R, G, B order (GDAL's photometric interpretation): ITU-R BT.601 luminance.
             self.grey = (0.299 * colour[0] + 0.587 * colour[1] + 0.114 * colour[2]).astype(np.float32)
+            if all(c.dtype == np.uint8 for c in colour[:3]):
+                self.luma = cv2.cvtColor(np.dstack([colour[2], colour[1], colour[0]]), cv2.COLOR_BGR2GRAY)
+            else:
+                self.luma = np.clip(np.rint(self.grey), 0, 255).astype(np.uint8)
         else:
             self.grey = colour[0].astype(np.float32)
+            self.luma = colour[0] if colour[0].dtype == np.uint8 else np.clip(np.rint(self.grey), 0, 255).astype(np.uint8)
         # The alpha band (DEFLATE) or the internal mask (JPEG): GDAL gives both as the first band's mask.
         self.mask = bands[0].GetMaskBand().ReadAsArray() > 0
         self.valid_fraction = float(self.mask.mean())
         self.file_mb = os.path.getsize(path) / 1e6
         self.world_file = os.path.exists(os.path.splitext(path)[0] + '.tfw')
-        match = re.search(r'_(\d+)\.tif$', self.name)
-        self.index = int(match.group(1)) if match else -1
+        match = TILE_NAME.match(self.name)
+        self.index = int(match.group('index')) if match else -1
+        self.version = int(match.group('version') or 1) if match else 1
 
     def to_pixel(self, easting_m, northing_m):
         """Continuous pixel coordinates (x right, y down), pixel centres on integers (OpenCV's convention)."""
@@ -73,9 +89,29 @@ class Tile:
         return bool(np.all(self.mask[yi - margin_px:yi + margin_px + 1, xi - margin_px:xi + margin_px + 1]))
 
 
+def parse_tile_name(name):
+    """(prefix, index, version) of a numbered tile's file name (NAME_NNNN.tif: version 1; NAME_NNNN_vK.tif: version
+    K), or None for any other file: COG copies (NAME_NNNN.cog.tif), files being written (.partial) and hidden ones."""
+    if name.startswith('.') or '.partial' in name or name.endswith('.cog.tif'):
+        return None
+    match = TILE_NAME.match(name)
+    if not match:
+        return None
+    return match.group('prefix'), int(match.group('index')), int(match.group('version') or 1)
+
+
 def tile_paths(folder):
-    """The numbered tiles of a folder (NAME_NNNN.tif; COG copies, NAME_NNNN.cog.tif, left out), in index order."""
-    return sorted(glob.glob(os.path.join(folder, '*_[0-9][0-9][0-9][0-9].tif')))
+    """The numbered tiles of a folder in index order: per index, the highest version present (a re-rendered tile
+    NAME_NNNN_vK.tif replaces NAME_NNNN.tif and the lower versions; the writer removes them once it is complete)."""
+    best = {}  # (prefix, index) -> (version, path)
+    for path in glob.glob(os.path.join(folder, '*.tif')):
+        parsed = parse_tile_name(os.path.basename(path))
+        if parsed is None:
+            continue
+        prefix, index, version = parsed
+        if (prefix, index) not in best or version > best[(prefix, index)][0]:
+            best[(prefix, index)] = (version, path)
+    return [best[k][1] for k in sorted(best, key=lambda k: (k[1], k[0]))]
 
 
 def read_tiles(folder):
@@ -273,3 +309,92 @@ def overlapping_pair_shifts(tiles):
             s.update({'a': a.name, 'b': b.name, 'consecutive': b.index - a.index == 1})
             pairs.append(s)
     return pairs
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Colour (brightness) agreement of overlapping tiles.
+
+def pair_colour_difference(a, b, dx_px, dy_px, erode_px=OVERLAP_ERODE_PX, min_pixels=MIN_COLOUR_PIXELS):
+    """Luma of tile b against tile a where both have data, after aligning b onto a by the pair's measured shift.
+
+    dx_px, dy_px: the shift of b relative to a on a's grid (pair_shift's dx_px, dy_px): b is sampled at a's pixel
+    plus the offset between the tiles' origins plus the shift, rounded to whole pixels (no interpolation: the grey
+    levels compared are the tiles' own). Both data masks are eroded by erode_px first (edge pixels are blended with
+    no-data). Luma: 8-bit, OpenCV's BGR -> GRAY (Tile.luma).
+
+    Returns None when fewer than min_pixels pixels are common; else a dict: level_step_grey (mean luma of a minus
+    mean luma of b on the common pixels, signed), abs_diff_hist (256 counts of |luma a - luma b|, numpy int64),
+    abs_diff_median_grey, pixels (common pixel count), offset_px ((col, row) offset applied to b).
+    """
+    ga, gb = a.geotransform, b.geotransform
+    du = (ga[0] - gb[0]) / gb[1] + dx_px  # a's column + du = b's column
+    dv = (ga[3] - gb[3]) / gb[5] + dy_px
+    ou, ov = int(round(du)), int(round(dv))
+    # a's pixels whose counterpart in b exists: a column range and a row range.
+    c0, c1 = max(0, -ou), min(a.width, b.width - ou)
+    r0, r1 = max(0, -ov), min(a.height, b.height - ov)
+    if c1 <= c0 or r1 <= r0:
+        return None
+    kernel = np.ones((2 * erode_px + 1, 2 * erode_px + 1), np.uint8) if erode_px > 0 else None
+
+    def eroded(mask, rows, cols):
+        """The mask inside rows x cols, eroded; the tile's border counts as no-data, the rest of the tile around
+        the crop as it is (a margin of erode_px is eroded with it)."""
+        if kernel is None:
+            return mask[rows, cols]
+        r_lo, r_hi = max(0, rows.start - erode_px), min(mask.shape[0], rows.stop + erode_px)
+        c_lo, c_hi = max(0, cols.start - erode_px), min(mask.shape[1], cols.stop + erode_px)
+        window = cv2.erode(mask[r_lo:r_hi, c_lo:c_hi].astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT,
+                           borderValue=0)
+        return window[rows.start - r_lo:rows.stop - r_lo, cols.start - c_lo:cols.stop - c_lo] > 0
+
+    rows_a, cols_a = slice(r0, r1), slice(c0, c1)
+    rows_b, cols_b = slice(r0 + ov, r1 + ov), slice(c0 + ou, c1 + ou)
+    both = eroded(a.mask, rows_a, cols_a) & eroded(b.mask, rows_b, cols_b)
+    pixels = int(both.sum())
+    if pixels < min_pixels:
+        return None
+    la = a.luma[rows_a, cols_a][both].astype(np.int16)
+    lb = b.luma[rows_b, cols_b][both].astype(np.int16)
+    hist = np.bincount(np.abs(la - lb), minlength=256).astype(np.int64)
+    return {'level_step_grey': float(la.mean() - lb.mean()), 'abs_diff_hist': hist,
+            'abs_diff_median_grey': histogram_median(hist), 'pixels': pixels, 'offset_px': (ou, ov)}
+
+
+def histogram_median(hist):
+    """Median of the integer values counted in hist (hist[v]: how many times v), as numpy.median would give it
+    (the mean of the two middle values for an even count); None when empty."""
+    n = int(hist.sum())
+    if n == 0:
+        return None
+    cum = np.cumsum(hist)
+    lower = int(np.searchsorted(cum, (n - 1) // 2 + 1))  # value of rank (n - 1) // 2 (0-based)
+    upper = int(np.searchsorted(cum, n // 2 + 1))        # value of rank n // 2
+    return 0.5 * (lower + upper)
+
+
+def overlap_colour_figures(tiles, pairs, erode_px=OVERLAP_ERODE_PX):
+    """Brightness agreement of every overlapping pair of tiles (consecutive and others), each aligned by its measured
+    shift (pairs: overlapping_pair_shifts; pairs without a shift are left out).
+
+    Returns overlap_level_step_max_grey (max over pairs of |mean luma a - mean luma b| on their common pixels),
+    overlap_abs_diff_median_grey (median of |luma a - luma b| pooled over the common pixels of all pairs),
+    overlap_colour_pairs (pairs measured), overlap_colour_pixels, and per pair (a, b, level_step_grey,
+    abs_diff_median_grey, pixels) in overlap_colour_per_pair. Figures None when no pair could be measured.
+    """
+    by_name = {t.name: t for t in tiles}
+    pooled = np.zeros(256, np.int64)
+    steps, per_pair = [], []
+    for p in pairs:
+        if p.get('dx_px') is None or p.get('dy_px') is None or p['a'] not in by_name or p['b'] not in by_name:
+            continue
+        d = pair_colour_difference(by_name[p['a']], by_name[p['b']], p['dx_px'], p['dy_px'], erode_px=erode_px)
+        if d is None:
+            continue
+        pooled += d['abs_diff_hist']
+        steps.append(abs(d['level_step_grey']))
+        per_pair.append({'a': p['a'], 'b': p['b'], 'level_step_grey': d['level_step_grey'],
+                         'abs_diff_median_grey': d['abs_diff_median_grey'], 'pixels': d['pixels']})
+    return {'overlap_level_step_max_grey': max(steps) if steps else None,
+            'overlap_abs_diff_median_grey': histogram_median(pooled), 'overlap_colour_pairs': len(steps),
+            'overlap_colour_pixels': int(pooled.sum()), 'overlap_colour_per_pair': per_pair}
