@@ -490,6 +490,13 @@ BENCHMARKS = {
             ('adjusted_return_pass_misalignment_max_px', 'after adjust_tiles: other pairs, max (px; target <= 2)'),
             ('adjusted_return_pass_misalignment_median_px', 'after adjust_tiles: other pairs, median (px)'),
             ('adjusted_landmark_error_*_m', 'after adjust_tiles: landmark error (m)'),
+            ('*_recomposed_overlap_max_px', 'recomposed after the dive from the final pose graph (recompose_tiles): '
+                                            'every overlapping pair misaligned, max (px; target <= 1)'),
+            ('*_recomposed_landmark_p95_m', 'recomposed after the dive: landmark error, p95 (m; target <= half the '
+                                            'live figure)'),
+            ('*_recomposed_overlap_*_grey', 'recomposed after the dive: overlapping tiles in colour (grey levels)'),
+            ('recomposed_*', 'recomposed after the dive from the final pose graph (recompose_tiles)'),
+            ('recompose_tiles_s', 'time to recompose (recompose_tiles) and measure the tiles (s)'),
             ('peak_rss_mb*', 'peak resident memory (MB)'),
             ('cpu_s_*', 'CPU time of the node (s)'),
             ('chain_cpu_s', 'CPU time of the three nodes (s)'),

@@ -6,7 +6,6 @@
 #include <stdexcept>
 
 #include <geometry_msgs/TransformStamped.h>
-#include <ros/callback_queue.h>
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
@@ -749,13 +748,8 @@ void FusionRos::publishDatum() {
 }
 
 void FusionRos::publishPaths() {
-  // The inputs stopped (end of a bag, a pause): what waits for newer inputs goes to the filter now. Not while
-  // callbacks are still queued: then this thread was busy, not the inputs stopped, and releasing a motion before the
-  // IMU samples queued behind it leaves its image without attitude.
-  auto* callbacks = dynamic_cast<ros::CallbackQueue*>(nh_.getCallbackQueue());
-  const bool inputs_queued = callbacks && !callbacks->isEmpty();
-  if (!queue_.empty() && !inputs_queued &&
-      (ros::SteadyTime::now() - last_input_wall_).toSec() > std::max(0.5, config_.reorder_delay_s))
+  // The inputs stopped (end of a bag, a pause): what waits for newer inputs goes to the filter now.
+  if (!queue_.empty() && (ros::SteadyTime::now() - last_input_wall_).toSec() > std::max(0.5, config_.reorder_delay_s))
     release(true);
   const ros::Time now = ros::Time::now();
   for (auto [path, pub] : {std::make_pair(&fused_path_, &fused_path_pub_), std::make_pair(&nav_path_, &nav_path_pub_),

@@ -102,6 +102,10 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readDouble("rerender_threshold_gsd", &c.rerender_threshold_gsd, 0.05, 1000.0,
                "image move (ground sample distances) that makes a written tile drawn again");
   p.readDouble("rerender_period_s", &c.rerender_period_s, 0.05, 600.0, "wall seconds between looks at the tiles");
+  p.readDouble("tile_adjustment_period_s", &c.tile_adjustment_period_s, 0.0, 3600.0,
+               "wall seconds between registrations of the written tiles with each other, 0: none");
+  if (c.tile_adjustment_period_s > 0.0 && c.tile_adjustment_period_s < 1.0)
+    throw std::invalid_argument("parameter ~tile_adjustment_period_s must be 0 or in [1, 3600]");
   p.readBool("keep_images", &c.keep_images, "keep the tiles' images for drawing them again");
   p.readInt("kept_image_quality", &c.kept_image_quality, 50, 100, "JPEG quality of the kept images");
   p.readBool("gain_compensation", &c.gain_compensation, "match each new tile's gains to the written tiles");

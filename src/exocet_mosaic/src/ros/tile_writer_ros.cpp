@@ -20,6 +20,7 @@
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
 #include "exocet_mosaic/tiles/closed_mosaic_tile.h"
+#include "exocet_mosaic/tiles/tile_network_adjustment.h"
 
 namespace exocet_mosaic {
 
@@ -140,6 +141,13 @@ TileWriterRos::~TileWriterRos() {
     }
     rerenderDue();
     saveCorrections();
+    if (config_.tile_adjustment_period_s > 0.0) {
+      {
+        std::unique_lock<std::mutex> lock(write_mutex_);
+        write_cv_.wait_for(lock, std::chrono::seconds(300), [this]() { return write_queue_.empty() && !writing_; });
+      }
+      if (adjustWrittenTiles() > 0) rerenderDue();
+    }
     std::unique_lock<std::mutex> lock(write_mutex_);
     write_cv_.wait_for(lock, std::chrono::seconds(300), [this]() { return write_queue_.empty() && !writing_; });
   }
@@ -661,6 +669,7 @@ void TileWriterRos::writerLoop() {
     }
     ++tiles_written_;
     if (record) {
+      tiles_changed_since_adjustment_ = true;
       images_kept_ += static_cast<std::int64_t>(record->images.size());
       images_not_kept_ += static_cast<std::int64_t>(pending.mosaic.images.size() - record->images.size());
       records_[record->index] = std::move(*record);
@@ -798,7 +807,12 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
     write_cv_.notify_all();
     return;
   }
-  records_[record.index] = record;
+  // Keep an adjustment made while this version was drawn (applied to the record since): it is the newer.
+  const auto current = records_.find(record.index);
+  tiles::TileRecord committed = record;
+  if (current != records_.end()) committed.adjustment = current->second.adjustment;
+  records_[record.index] = committed;
+  tiles_changed_since_adjustment_ = true;
   ++tiles_rerendered_;
   ROS_INFO("tile writer: %s drawn again (version %d, images moved by up to %.3f m) in %.0f ms",
            tile.geotiff_path.c_str(), tile.version, revision.moved_max_m, tile.write_ms);
@@ -810,13 +824,18 @@ void TileWriterRos::rerenderLoop() {
   // Drawing tiles again may wait; the chain may not: this thread yields the CPU to the node's others.
   ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), 10);
   std::unique_lock<std::mutex> lock(rerender_mutex_);
-  ros::WallTime last_save = ros::WallTime::now();
+  ros::WallTime last_save = ros::WallTime::now(), last_adjustment = ros::WallTime::now();
   while (!stop_rerender_) {
     rerender_cv_.wait_for(lock, std::chrono::duration<double>(config_.rerender_period_s),
                           [this]() { return stop_rerender_; });
     if (stop_rerender_) break;
     lock.unlock();
     rerenderDue();
+    if (config_.tile_adjustment_period_s > 0.0 &&
+        (ros::WallTime::now() - last_adjustment).toSec() >= config_.tile_adjustment_period_s) {
+      last_adjustment = ros::WallTime::now();
+      if (adjustWrittenTiles() > 0) rerenderDue();
+    }
     if ((ros::WallTime::now() - last_save).toSec() > 10.0) {
       saveCorrections();
       last_save = ros::WallTime::now();
@@ -876,6 +895,45 @@ int TileWriterRos::rerenderDue() {
     ++queued;
   }
   return queued;
+}
+
+int TileWriterRos::adjustWrittenTiles() {
+  std::vector<std::string> paths;
+  std::map<std::string, std::pair<int, int>> tile_of_path;  // path -> (index, version)
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    if (!tiles_changed_since_adjustment_ || !revision_pending_.empty() || !write_queue_.empty() || writing_) return 0;
+    tiles_changed_since_adjustment_ = false;
+    for (const auto& [index, record] : records_) {
+      const std::string path = config_.files.output_dir + "/" + writer_->baseName(index, record.version) + ".tif";
+      paths.push_back(path);
+      tile_of_path[path] = {index, record.version};
+    }
+  }
+  if (paths.size() < 2) return 0;
+  const tiles::TileAdjustmentResult network = tiles::measureAndSolve(paths, tiles::TileAdjustmentConfig());
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  if (!network.ok) {
+    last_rerender_problem_ = "tiles not registered with each other: " + network.error;
+    ROS_WARN_THROTTLE(30.0, "tile writer: %s", last_rerender_problem_.c_str());
+    return 0;
+  }
+  ++tile_adjustments_;
+  last_adjustment_pair_max_px_ = 0;
+  for (const auto& pair : network.pairs)
+    last_adjustment_pair_max_px_ =
+        std::max(last_adjustment_pair_max_px_, pair.offset_en_m.norm() / network.tiles[pair.a].gsd_m);
+  int adjusted = 0;
+  for (const tiles::AdjustedTile& t : network.tiles) {
+    const auto which = tile_of_path.find(t.path);
+    if (which == tile_of_path.end()) continue;
+    const auto record = records_.find(which->second.first);
+    // A tile drawn again meanwhile was measured in its previous version: its move waits for the next registration.
+    if (record == records_.end() || record->second.version != which->second.second) continue;
+    tiles::applyTileAdjustment(&record->second, t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
+    ++adjusted;
+  }
+  return adjusted;
 }
 
 void TileWriterRos::saveCorrections() {
@@ -1063,6 +1121,9 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
       status.add("failures drawing a tile again", rerender_failures_);
       status.addf("largest move of a written tile's images (m)", "%.4f", max_tile_move_m_);
       status.addf("last drawing of a tile again (ms)", "%.0f", last_rerender_ms_);
+      status.add("registrations of the tiles with each other", tile_adjustments_);
+      status.addf("largest offset between overlapping tiles at the last registration (px)", "%.2f",
+                  last_adjustment_pair_max_px_);
       if (!last_rerender_problem_.empty()) status.add("last problem drawing a tile again", last_rerender_problem_);
     }
   }

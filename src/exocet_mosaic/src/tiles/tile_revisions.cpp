@@ -91,6 +91,7 @@ nlohmann::json tileRecordToJson(const TileRecord& r) {
     images.push_back(image);
   }
   j["images"] = images;
+  j["adjustment"] = matrixJson(r.adjustment);
   return j;
 }
 
@@ -152,6 +153,7 @@ TileRecord tileRecordFromJson(const nlohmann::json& j) {
     image.ground_from_px = matrixField(i, "ground_from_px");
     r.images.push_back(image);
   }
+  if (j.contains("adjustment")) r.adjustment = matrixField(j, "adjustment");
   return r;
 }
 
@@ -220,6 +222,16 @@ Eigen::Vector2d applySimilarity(const Eigen::Vector4d& p, const Eigen::Vector2d&
 
 }  // namespace
 
+void applyTileAdjustment(TileRecord* record, const Eigen::Vector2d& centre_en_m, const Eigen::Vector2d& shift_en_m,
+                         double rotation_rad, double scale_change) {
+  // In the record's ground frame q = p - o:  q' = q + shift + B (q + o - c),  B = [s -r; r s].
+  const double s = scale_change, r = rotation_rad;
+  const Eigen::Vector2d d = record->ground_origin_en_m - centre_en_m;
+  const Eigen::Vector2d t = shift_en_m + Eigen::Vector2d(s * d.x() - r * d.y(), r * d.x() + s * d.y());
+  const cv::Matx33d move(1 + s, -r, t.x(), r, 1 + s, t.y(), 0, 0, 1);
+  record->adjustment = compose::normalizeHomography(move * record->adjustment);
+}
+
 std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCorrectionTrack& track,
                                       const RevisionConfig& config) {
   const std::string error = config.validate();
@@ -245,7 +257,8 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
   if (targets == 0) {
     for (std::size_t i = 0; i < n; ++i) {
       const RecordedImage& image = record.images[i];
-      out[i] = compose::normalizeHomography(translation(track.at(image.stamp_s) - image.closed_correction_m) *
+      out[i] = compose::normalizeHomography(record.adjustment *
+                                            translation(track.at(image.stamp_s) - image.closed_correction_m) *
                                             image.closed_ground_from_px);
     }
     return out;
@@ -282,7 +295,8 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
       }
       if (count > 0) bend /= count;
     }
-    out[i] = compose::normalizeHomography(translation(bend) * similarity * record.images[i].closed_ground_from_px);
+    out[i] = compose::normalizeHomography(record.adjustment * translation(bend) * similarity *
+                                          record.images[i].closed_ground_from_px);
   }
   return out;
 }

@@ -1,6 +1,7 @@
 // recompose_tiles: after the dive, draws every tile again from its images at the pose graph's final corrections
-// (tiles/tile_revisions.h: each image placed by its tile's chain, carried onto the graph per image), with the tiles'
-// gains matched in one pass over the dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
+// (tiles/tile_revisions.h: each image placed by its tile's chain, carried onto the graph per image), then registers
+// the overlapping tiles so drawn with each other and moves each by one similarity (tile_network_adjustment.h, what
+// adjust_tiles does) before drawing it a last time from its images, with the tiles' gains matched over the dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
 // last graph corrections it received (graph_corrections.csv there, or --corrections). The live tiles are kept.
 //   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
 // Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.
@@ -8,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -19,6 +21,7 @@
 #include "exocet_common/json_file.h"
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
 
 namespace {
@@ -63,7 +66,7 @@ et::PositionCorrectionTrack readCorrections(const std::string& path) {
 int main(int argc, char** argv) {
   std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather";
   et::RevisionConfig revision;
-  bool gain_compensation = true;
+  bool gain_compensation = true, tile_adjustment = true;
   CLI::App app(
       "Draws every tile of a dive again, per image, at the pose graph's final corrections: the records and images the\n"
       "tile writer kept in DIR/.exocet_images/ (~keep_images), the corrections it last received there\n"
@@ -84,6 +87,8 @@ int main(int argc, char** argv) {
                  "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
       ->capture_default_str();
   app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
+  app.add_flag("!--no-tile-adjustment", tile_adjustment,
+               "place the images by the graph only (no registration of the overlapping tiles)");
   app.add_option("--report", report, "also write what was done as JSON")->type_name("FILE.json");
   app.footer("Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.");
   if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
@@ -123,13 +128,51 @@ int main(int argc, char** argv) {
   std::sort(records.begin(), records.end(),
             [](const et::TileRecord& a, const et::TileRecord& b) { return a.index < b.index; });
 
+  ec::PlacedImageRenderConfig render;
+  render.blend = blend;
+  int adjusted = 0;
+  if (tile_adjustment) {
+    // First pass: the tiles at the graph, in a scratch folder, registered with each other.
+    const std::string scratch = output_dir + "/.recompose_graph_pass";
+    std::filesystem::remove_all(scratch, error);
+    std::filesystem::create_directories(scratch, error);
+    if (error) return badInput("cannot create '" + scratch + "': " + error.message());
+    et::TileWriterConfig scratch_files;
+    scratch_files.output_dir = scratch;
+    scratch_files.prefix = prefix;
+    scratch_files.write_world_file = false;
+    et::GeoTiffTileWriter scratch_writer(scratch_files);
+    std::map<std::string, std::size_t> record_of_path;
+    for (std::size_t k = 0; k < records.size(); ++k) {
+      const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision);
+      if (tile.raster.image.empty()) continue;
+      const et::WrittenTile out = scratch_writer.writeAt(tile.raster, tile.record.metadata, records[k].index);
+      if (out.ok) record_of_path[out.geotiff_path] = k;
+    }
+    std::vector<std::string> paths;
+    for (const auto& [path, k] : record_of_path) paths.push_back(path);
+    const et::TileAdjustmentResult network = et::measureAndSolve(paths, et::TileAdjustmentConfig());
+    if (!network.ok) {
+      std::cerr << "recompose_tiles: the tiles could not be registered with each other (" << network.error
+                << "): drawn at the graph only\n";
+    } else {
+      for (const et::AdjustedTile& t : network.tiles) {
+        const auto k = record_of_path.find(t.path);
+        if (k == record_of_path.end()) continue;
+        et::applyTileAdjustment(&records[k->second], t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
+        ++adjusted;
+      }
+      std::printf("recompose_tiles: %zu overlapping pairs registered, %d tiles adjusted\n", network.pairs.size(),
+                  adjusted);
+    }
+    std::filesystem::remove_all(scratch, error);
+  }
+
   et::TileWriterConfig files;
   files.output_dir = output_dir;
   files.prefix = prefix;
   et::GeoTiffTileWriter writer(files);
   ec::TileGainCompensator gains;
-  ec::PlacedImageRenderConfig render;
-  render.blend = blend;
   nlohmann::ordered_json json;
   json["tiles"] = nlohmann::ordered_json::array();
   int written = 0, failed = 0;
@@ -169,6 +212,7 @@ int main(int argc, char** argv) {
     json["written"] = written;
     json["failed"] = failed;
     json["graph_key_frames"] = track.size();
+    json["tiles_adjusted"] = adjusted;
     try {
       exocet_common::writeJsonFileAtomically(report, json);
     } catch (const std::exception& e) {

@@ -59,6 +59,10 @@ struct TileWriterNodeConfig {
   std::string graph_corrections_topic;
   double rerender_threshold_gsd = 0.5;  ///< in ground sample distances, [0.05, 1000]
   double rerender_period_s = 1.0;       ///< wall seconds between two looks at the written tiles, [0.05, 600]
+  /// With graph_corrections_topic: at most this often (wall s, [1, 3600]) and when tiles changed, the written tiles
+  /// are registered with their overlapping neighbours (tiles::measureAndSolve, as adjust_tiles) and each moved by one
+  /// similarity on top of the graph's placement; 0 turns it off.
+  double tile_adjustment_period_s = 10.0;
   /// Keep each tile's images (as drawn, JPEG) and its record in <output_dir>/.exocet_images/, for the tiles drawn
   /// again and recompose_tiles after the dive. Forced on by graph_corrections_topic.
   bool keep_images = true;

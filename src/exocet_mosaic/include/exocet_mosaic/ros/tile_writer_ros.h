@@ -101,6 +101,9 @@ class TileWriterRos {
   /// Draws again the written tiles the corrections moved and queues them for the writer; returns how many.
   int rerenderDue();
   void saveCorrections();
+  /// Registers the written tiles with each other and adds each one's move to its record (the next look draws them
+  /// again); nothing while a tile waits to be written. Returns how many tiles it adjusted.
+  int adjustWrittenTiles();
   void flushAll(const std::string& reason);
   void writerLoop();
   void publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic);
@@ -186,6 +189,9 @@ class TileWriterRos {
   std::int64_t tiles_rerendered_ = 0, rerender_failures_ = 0, images_kept_ = 0, images_not_kept_ = 0;
   double last_rerender_ms_ = 0, max_tile_move_m_ = 0;
   std::string last_rerender_problem_;
+  bool tiles_changed_since_adjustment_ = false;  ///< write_mutex_
+  std::int64_t tile_adjustments_ = 0;
+  double last_adjustment_pair_max_px_ = 0;
 
   // Counters for /diagnostics.
   std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;

@@ -69,6 +69,9 @@ struct TileRecord {
   std::string local_frame;  ///< TileRaster::local_frame
   TileMetadata metadata;
   std::vector<RecordedImage> images;
+  /// A similarity on the tile's ground (E - origin E, N - origin N) after the images' placements: the registration of
+  /// the tile with its overlapping neighbours (applyTileAdjustment); identity until one is made.
+  cv::Matx33d adjustment = cv::Matx33d::eye();
 };
 
 /// The record as JSON (the tile writer keeps one file per tile beside the images).
@@ -85,6 +88,13 @@ std::string recordedImageName(const std::string& prefix, double stamp_s);
  */
 std::string writeRecordedImage(const std::string& folder, const std::string& name, const cv::Mat& image,
                                int jpeg_quality);
+
+/**
+ * @brief Composes the tile network adjustment's move of this tile (tiles::AdjustedTile: p -> p + shift + [s -r; r s]
+ * (p - centre), UTM) onto the record's adjustment: measured on the tile as currently drawn, it is a further move.
+ */
+void applyTileAdjustment(TileRecord* record, const Eigen::Vector2d& centre_en_m, const Eigen::Vector2d& shift_en_m,
+                         double rotation_rad, double scale_change);
 
 /// How a tile is placed again at the graph's corrections.
 struct RevisionConfig {
