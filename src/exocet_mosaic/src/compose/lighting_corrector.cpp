@@ -53,6 +53,13 @@ void LightingCorrector::setConfig(const LightingConfig& config) {
   ++version_;  // blur, gain limits or target may have changed
 }
 
+LightingCorrector LightingCorrector::clone() const {
+  LightingCorrector copy(*this);
+  copy.mean_ = mean_.clone();
+  copy.gain_ = gain_.clone();
+  return copy;
+}
+
 void LightingCorrector::reset() {
   mean_.release();
   image_size_ = cv::Size();

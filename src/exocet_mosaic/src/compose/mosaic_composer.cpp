@@ -133,6 +133,10 @@ MosaicComposer::~MosaicComposer() = default;
 
 const LightingCorrector& MosaicComposer::lighting() const { return impl_->lighting; }
 
+LightingCorrector MosaicComposer::lightingSnapshot() const {
+  return config_.lighting.enabled ? impl_->lighting.clone() : LightingCorrector(config_.lighting);
+}
+
 void MosaicComposer::setConfig(const ComposerConfig& config) {
   const std::string error = config.validate();
   if (!error.empty()) throw std::invalid_argument("MosaicComposer: " + error);
@@ -188,8 +192,11 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, i
   const cv::Mat& warped = warp.image_alpha;
   const cv::Rect& roi = warp.roi;
   if (config.keep_composed_images) {
-    m.composed.push_back({frame_index, stamp_s, image, local_from_px});
-    m.composed_bytes += image.total() * image.elemSize();
+    cv::Mat kept = raw;  // before the lighting correction (ComposedImage::image)
+    if (kept.channels() != m.channels)
+      cv::cvtColor(raw, kept, m.channels == 3 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGR2GRAY);
+    m.composed.push_back({frame_index, stamp_s, kept, local_from_px});
+    m.composed_bytes += kept.total() * kept.elemSize();
   }
   m.canvas.accumulateAlpha(warped, roi.tl(), replace);
   if (config.blend == "multiband") {

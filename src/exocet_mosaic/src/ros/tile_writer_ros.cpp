@@ -139,7 +139,7 @@ TileWriterRos::~TileWriterRos() {
       std::unique_lock<std::mutex> lock(write_mutex_);
       write_cv_.wait_for(lock, std::chrono::seconds(120), [this]() { return write_queue_.empty() && !writing_; });
     }
-    rerenderDue();
+    rerenderDue(true);
     saveCorrections();
     if (config_.tile_adjustment_period_s > 0.0) {
       {
@@ -779,8 +779,10 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
   const tiles::TileRecord& record = revision.record;
   writing_ = true;
   lock.unlock();
-  // The tile keeps the gains it was first written with (its neighbours were matched to them).
-  std::optional<compose::TileGains> gains = config_.gain_compensation ? gains_.gainsOf(record.index) : std::nullopt;
+  // Matched again to the others as they are now (its lighting and place changed; its own record left out).
+  std::optional<compose::TileGains> gains =
+      config_.gain_compensation ? std::optional<compose::TileGains>(gains_.estimate(revision.raster, record.index))
+                                : std::nullopt;
   if (gains && gains->channels == revision.raster.image.channels())
     revision.raster = compose::TileGainCompensator::apply(revision.raster, *gains);
   const tiles::WrittenTile tile = writer->writeVersion(revision.raster, record.metadata, record.index, record.version);
@@ -844,7 +846,7 @@ void TileWriterRos::rerenderLoop() {
   }
 }
 
-int TileWriterRos::rerenderDue() {
+int TileWriterRos::rerenderDue(bool every_tile) {
   tiles::PositionCorrectionTrack track;
   std::int64_t received = 0;
   {
@@ -852,7 +854,7 @@ int TileWriterRos::rerenderDue() {
     track = corrections_;
     received = corrections_received_;
   }
-  if (track.empty()) return 0;
+  if (track.empty() && !every_tile) return 0;
   std::vector<tiles::TileRecord> due;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
@@ -862,17 +864,26 @@ int TileWriterRos::rerenderDue() {
       if (failed != revision_failed_at_.end() && failed->second == received) continue;  // same corrections failed
       const double moved_m = tiles::tileDisplacementM(record, track);
       max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
-      if (moved_m > config_.rerender_threshold_gsd * record.gsd_m) due.push_back(record);
+      if (every_tile || moved_m > config_.rerender_threshold_gsd * record.gsd_m) due.push_back(record);
     }
   }
   compose::PlacedImageRenderConfig render;
   render.blend = config_.composer.blend;
   render.feather_power = config_.composer.feather_power;
   render.multiband_bands = config_.composer.multiband_bands;
+  if (due.empty()) return 0;
+  // The images are kept before the lighting correction: corrected with the field as it is now.
+  std::shared_ptr<compose::LightingCorrector> lighting;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    lighting = std::make_shared<compose::LightingCorrector>(composer_.lightingSnapshot());
+  }
+  const auto prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
   int queued = 0;
   for (const tiles::TileRecord& record : due) {
     const auto start = std::chrono::steady_clock::now();
-    tiles::RevisedTile revision = tiles::renderTileAt(record, track, images_dir_, render);
+    tiles::RevisedTile revision =
+        tiles::renderTileAt(record, track, images_dir_, render, tiles::RevisionConfig(), prepare);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     std::lock_guard<std::mutex> lock(write_mutex_);
     last_rerender_ms_ = ms;

@@ -318,7 +318,8 @@ double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack
 }
 
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
-                         compose::PlacedImageRenderConfig render, const RevisionConfig& config) {
+                         compose::PlacedImageRenderConfig render, const RevisionConfig& config,
+                         const std::function<cv::Mat(const cv::Mat&)>& prepare) {
   RevisedTile out;
   out.record = record;
   out.record.version = record.version + 1;
@@ -335,7 +336,7 @@ RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack
       out.problem = "image " + images_dir + "/" + image.file + " cannot be read: left out";
       continue;
     }
-    placed.push_back({pixels, image.ground_from_px});
+    placed.push_back({prepare ? prepare(pixels) : pixels, image.ground_from_px});
   }
   const compose::PlacedRaster drawn = compose::renderPlacedImages(placed, record.ground_origin_en_m, render);
   if (drawn.image.empty()) {

@@ -9,16 +9,20 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
+#include <memory>
 #include <iostream>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "exocet_common/command_line.h"
 #include "exocet_common/json_file.h"
+#include "exocet_mosaic/compose/lighting_corrector.h"
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
@@ -66,7 +70,7 @@ et::PositionCorrectionTrack readCorrections(const std::string& path) {
 int main(int argc, char** argv) {
   std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather";
   et::RevisionConfig revision;
-  bool gain_compensation = true, tile_adjustment = true;
+  bool gain_compensation = true, tile_adjustment = true, lighting_correction = true;
   CLI::App app(
       "Draws every tile of a dive again, per image, at the pose graph's final corrections: the records and images the\n"
       "tile writer kept in DIR/.exocet_images/ (~keep_images), the corrections it last received there\n"
@@ -87,6 +91,8 @@ int main(int argc, char** argv) {
                  "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
       ->capture_default_str();
   app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
+  app.add_flag("!--no-lighting", lighting_correction,
+               "draw the images as kept (the tile writer keeps them before its lighting correction)");
   app.add_flag("!--no-tile-adjustment", tile_adjustment,
                "place the images by the graph only (no registration of the overlapping tiles)");
   app.add_option("--report", report, "also write what was done as JSON")->type_name("FILE.json");
@@ -130,6 +136,24 @@ int main(int argc, char** argv) {
 
   ec::PlacedImageRenderConfig render;
   render.blend = blend;
+  // The lighting field of the whole dive (the live one was still settling during the first tiles): every kept image
+  // observed once, then each corrected with it.
+  auto lighting = std::make_shared<ec::LightingCorrector>();
+  std::function<cv::Mat(const cv::Mat&)> prepare;
+  if (lighting_correction) {
+    int observed = 0;
+    for (const et::TileRecord& record : records)
+      for (const et::RecordedImage& image : record.images) {
+        const cv::Mat pixels = cv::imread(records_dir + "/" + image.file, cv::IMREAD_UNCHANGED);
+        if (!pixels.empty() && lighting->observe(pixels)) ++observed;
+      }
+    if (lighting->ready()) {
+      prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
+      std::printf("recompose_tiles: lighting field from %d images\n", observed);
+    } else {
+      std::cerr << "recompose_tiles: too few images (" << observed << ") for a lighting field: drawn as kept\n";
+    }
+  }
   int adjusted = 0;
   if (tile_adjustment) {
     // First pass: the tiles at the graph, in a scratch folder, registered with each other.
@@ -144,7 +168,7 @@ int main(int argc, char** argv) {
     et::GeoTiffTileWriter scratch_writer(scratch_files);
     std::map<std::string, std::size_t> record_of_path;
     for (std::size_t k = 0; k < records.size(); ++k) {
-      const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision);
+      const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision, prepare);
       if (tile.raster.image.empty()) continue;
       const et::WrittenTile out = scratch_writer.writeAt(tile.raster, tile.record.metadata, records[k].index);
       if (out.ok) record_of_path[out.geotiff_path] = k;
@@ -177,7 +201,7 @@ int main(int argc, char** argv) {
   json["tiles"] = nlohmann::ordered_json::array();
   int written = 0, failed = 0;
   for (et::TileRecord record : records) {
-    et::RevisedTile tile = et::renderTileAt(record, track, records_dir, render, revision);
+    et::RevisedTile tile = et::renderTileAt(record, track, records_dir, render, revision, prepare);
     if (tile.raster.image.empty()) {
       std::cerr << "recompose_tiles: tile " << record.index << " not drawn: " << tile.problem << "\n";
       ++failed;

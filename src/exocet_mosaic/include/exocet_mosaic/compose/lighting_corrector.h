@@ -75,6 +75,8 @@ class LightingCorrector {
   cv::Mat fieldAt(const cv::Size& image_size) const;
 
   void reset();
+  /// A deep copy (the field's data is not shared): for another thread to correct images with the field as it is now.
+  LightingCorrector clone() const;
 
  private:
   cv::Mat gainMap() const;  // full-size CV_32FC(n) gains, cached per field version

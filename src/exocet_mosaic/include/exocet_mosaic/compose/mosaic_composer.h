@@ -59,11 +59,14 @@ struct ComposerFrame {
   std::optional<CameraGroundPose> pose;  ///< fused pose at this image; empty = not available
 };
 
-/// An image of a closed mosaic as it was drawn (undistorted, lighting-corrected) and where.
+/// An image of a closed mosaic and where it was drawn.
 struct ComposedImage {
   int index = -1;      ///< frame number
   double stamp_s = 0;  ///< acquisition time (s)
-  cv::Mat image;       ///< CV_8UC3 or CV_8UC1, the mosaic's channels
+  /// CV_8UC3 or CV_8UC1, the mosaic's channels, undistorted, BEFORE the lighting correction: a tile drawn again later
+  /// corrects it with the lighting field as it is then (lightingSnapshot()), the field of the dive's first minutes
+  /// being the least settled.
+  cv::Mat image;
   /// Image px -> ground (E - ground_origin E, N - ground_origin N) in metres, as the tile placed it.
   cv::Matx33d ground_from_px = cv::Matx33d::eye();
   /// Where the image's own fused pose puts its centre (same ground frame); empty when it had no pose or its pose was
@@ -144,6 +147,9 @@ class MosaicComposer {
 
   /// The lighting corrector (its field, for diagnostics and tests).
   const LightingCorrector& lighting() const;
+  /// A deep copy of the lighting corrector, for another thread; with the lighting correction disabled, one that is
+  /// never ready (its correct() returns the image unchanged).
+  LightingCorrector lightingSnapshot() const;
 
  private:
   void startMosaic(const ComposerFrame& frame, bool continued);  // continued: tied to the mosaic just closed

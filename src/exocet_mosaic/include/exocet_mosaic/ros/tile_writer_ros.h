@@ -98,8 +98,9 @@ class TileWriterRos {
   /// Writer thread, write_mutex_ not held: writes a revision, removes the previous version, announces it.
   void writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter* writer, std::unique_lock<std::mutex>& lock);
   void rerenderLoop();
-  /// Draws again the written tiles the corrections moved and queues them for the writer; returns how many.
-  int rerenderDue();
+  /// Draws again the written tiles the corrections moved (every tile: all of them, with the lighting field as it is
+  /// now) and queues them for the writer; returns how many.
+  int rerenderDue(bool every_tile = false);
   void saveCorrections();
   /// Registers the written tiles with each other and adds each one's move to its record (the next look draws them
   /// again); nothing while a tile waits to be written. Returns how many tiles it adjusted.

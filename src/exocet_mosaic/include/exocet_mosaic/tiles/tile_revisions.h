@@ -11,6 +11,7 @@
  */
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -47,7 +48,7 @@ class PositionCorrectionTrack {
 struct RecordedImage {
   int frame = -1;
   double stamp_s = 0;
-  std::string file;  ///< image file name in the tile records' folder (JPEG, as drawn)
+  std::string file;  ///< image file name in the tile records' folder (JPEG, before the lighting correction)
   int width_px = 0, height_px = 0;
   /// Image px -> ground (E - origin E, N - origin N) in metres, as the tile's first version drew it (the chain's
   /// placement, fitted to the navigation at close).
@@ -135,9 +136,11 @@ struct RevisedTile {
 /**
  * @brief Draws the tile at placementsAt(), the images read from `images_dir`, on the same GSD grid.
  * @param render blending; its gsd_m is replaced by the record's.
+ * @param prepare applied to each image read before it is drawn (the lighting correction); none: drawn as read
  */
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
-                         compose::PlacedImageRenderConfig render, const RevisionConfig& config = RevisionConfig());
+                         compose::PlacedImageRenderConfig render, const RevisionConfig& config = RevisionConfig(),
+                         const std::function<cv::Mat(const cv::Mat&)>& prepare = nullptr);
 
 }  // namespace tiles
 }  // namespace exocet_mosaic
