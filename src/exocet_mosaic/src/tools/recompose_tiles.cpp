@@ -1,7 +1,8 @@
 // recompose_tiles: after the dive, draws every tile again from its images at the pose graph's final corrections
 // (tiles/tile_revisions.h: each image placed by its tile's chain, carried onto the graph per image), then registers
 // the overlapping tiles so drawn with each other and moves each by one similarity (tile_network_adjustment.h, what
-// adjust_tiles does) before drawing it a last time from its images, with the tiles' gains matched over the dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
+// adjust_tiles does) before drawing it a last time from its images, with the tiles' gains solved jointly over the
+// dive (joint_tile_gains.h) and the lighting field of the whole dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
 // last graph corrections it received (graph_corrections.csv there, or --corrections). The live tiles are kept.
 //   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
 // Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.
@@ -22,6 +23,7 @@
 
 #include "exocet_common/command_line.h"
 #include "exocet_common/json_file.h"
+#include "exocet_mosaic/compose/joint_tile_gains.h"
 #include "exocet_mosaic/compose/lighting_corrector.h"
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
@@ -155,8 +157,10 @@ int main(int argc, char** argv) {
     }
   }
   int adjusted = 0;
-  if (tile_adjustment) {
-    // First pass: the tiles at the graph, in a scratch folder, registered with each other.
+  ec::JointTileGains joint;
+  if (tile_adjustment || gain_compensation) {
+    // First pass: the tiles at the graph, their levels for the gains, and in a scratch folder registered with each
+    // other.
     const std::string scratch = output_dir + "/.recompose_graph_pass";
     std::filesystem::remove_all(scratch, error);
     std::filesystem::create_directories(scratch, error);
@@ -170,24 +174,28 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < records.size(); ++k) {
       const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision, prepare);
       if (tile.raster.image.empty()) continue;
+      if (gain_compensation) joint.add(records[k].index, tile.raster);
+      if (!tile_adjustment) continue;
       const et::WrittenTile out = scratch_writer.writeAt(tile.raster, tile.record.metadata, records[k].index);
       if (out.ok) record_of_path[out.geotiff_path] = k;
     }
     std::vector<std::string> paths;
     for (const auto& [path, k] : record_of_path) paths.push_back(path);
-    const et::TileAdjustmentResult network = et::measureAndSolve(paths, et::TileAdjustmentConfig());
-    if (!network.ok) {
-      std::cerr << "recompose_tiles: the tiles could not be registered with each other (" << network.error
-                << "): drawn at the graph only\n";
-    } else {
-      for (const et::AdjustedTile& t : network.tiles) {
-        const auto k = record_of_path.find(t.path);
-        if (k == record_of_path.end()) continue;
-        et::applyTileAdjustment(&records[k->second], t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
-        ++adjusted;
+    if (tile_adjustment) {
+      const et::TileAdjustmentResult network = et::measureAndSolve(paths, et::TileAdjustmentConfig());
+      if (!network.ok) {
+        std::cerr << "recompose_tiles: the tiles could not be registered with each other (" << network.error
+                  << "): drawn at the graph only\n";
+      } else {
+        for (const et::AdjustedTile& t : network.tiles) {
+          const auto k = record_of_path.find(t.path);
+          if (k == record_of_path.end()) continue;
+          et::applyTileAdjustment(&records[k->second], t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
+          ++adjusted;
+        }
+        std::printf("recompose_tiles: %zu overlapping pairs registered, %d tiles adjusted\n", network.pairs.size(),
+                    adjusted);
       }
-      std::printf("recompose_tiles: %zu overlapping pairs registered, %d tiles adjusted\n", network.pairs.size(),
-                  adjusted);
     }
     std::filesystem::remove_all(scratch, error);
   }
@@ -196,7 +204,7 @@ int main(int argc, char** argv) {
   files.output_dir = output_dir;
   files.prefix = prefix;
   et::GeoTiffTileWriter writer(files);
-  ec::TileGainCompensator gains;
+  const std::map<int, std::array<double, 3>> solved_gains = joint.solve();
   nlohmann::ordered_json json;
   json["tiles"] = nlohmann::ordered_json::array();
   int written = 0, failed = 0;
@@ -208,8 +216,10 @@ int main(int argc, char** argv) {
       continue;
     }
     ec::TileGains g;
+    g.channels = tile.raster.image.channels();
     if (gain_compensation) {
-      g = gains.estimate(tile.raster, record.index);
+      const auto solved = solved_gains.find(record.index);
+      if (solved != solved_gains.end()) g.gain = g.far_gain = solved->second;
       tile.raster = ec::TileGainCompensator::apply(tile.raster, g);
     }
     tile.record.metadata.extra["recomposed"] = "final pose graph, per image";
@@ -219,7 +229,6 @@ int main(int argc, char** argv) {
       ++failed;
       continue;
     }
-    if (gain_compensation) gains.record(record.index, tile.raster, g);
     ++written;
     std::printf("  %s: %zu images, moved by up to %.4f m%s\n", std::filesystem::path(out.geotiff_path).filename().c_str(),
                 record.images.size(), tile.moved_max_m,
