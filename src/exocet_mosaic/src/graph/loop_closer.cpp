@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace exocet_mosaic {
 namespace graph {
@@ -18,6 +19,8 @@ std::string LoopCloserConfig::validate() const {
   if (max_queue < 1) e << "max_queue = " << max_queue << " must be >= 1; ";
   if (feature_cache_size < 2) e << "feature_cache_size = " << feature_cache_size << " must be >= 2; ";
   if (jpeg_quality < 50 || jpeg_quality > 100) e << "jpeg_quality = " << jpeg_quality << " outside [50, 100]; ";
+  if (max_image_side_px < 64 || max_image_side_px > 100000)
+    e << "max_image_side_px = " << max_image_side_px << " outside [64, 100000]; ";
   if (!(idle_wait_s > 0.0)) e << "idle_wait_s = " << idle_wait_s << " must be > 0; ";
   std::string text = e.str();
   if (text.size() >= 2) text.resize(text.size() - 2);
@@ -70,7 +73,28 @@ void LoopCloser::addKeyFrame(const LoopCloserKeyFrame& key_frame) {
     if (stopping_) return;
     Pending pending;
     pending.key_frame = key_frame;
-    pending.key_frame.gray = key_frame.gray.clone();  // the caller may reuse its buffer
+    const int side = std::max(key_frame.gray.cols, key_frame.gray.rows);
+    if (side > config_.max_image_side_px) {
+      // Downscaled, its camera with it: pixel centres scale about the image's corner (x' + 0.5 = s (x + 0.5)).
+      const double f = static_cast<double>(config_.max_image_side_px) / side;
+      cv::resize(key_frame.gray, pending.key_frame.gray, cv::Size(), f, f, cv::INTER_AREA);
+      LoopKeyFrame& k = pending.key_frame.key_frame;
+      k.camera.fx_px *= f;
+      k.camera.fy_px *= f;
+      k.camera.cx_px = (k.camera.cx_px + 0.5) * f - 0.5;
+      k.camera.cy_px = (k.camera.cy_px + 0.5) * f - 0.5;
+      k.camera.width_px = pending.key_frame.gray.cols;
+      k.camera.height_px = pending.key_frame.gray.rows;
+      Eigen::Matrix3d& m = pending.key_frame.view.camera_matrix;
+      m(0, 0) *= f;
+      m(1, 1) *= f;
+      m(0, 1) *= f;
+      m(0, 2) = (m(0, 2) + 0.5) * f - 0.5;
+      m(1, 2) = (m(1, 2) + 0.5) * f - 0.5;
+      pending.key_frame.view.image_size = pending.key_frame.gray.size();
+    } else {
+      pending.key_frame.gray = key_frame.gray.clone();  // the caller may reuse its buffer
+    }
     queue_.push_back(std::move(pending));
     ++stats_.key_frames;
     // Full: the oldest waiting key frame is only kept as a candidate, not searched (the newest matter most live).

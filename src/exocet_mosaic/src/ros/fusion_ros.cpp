@@ -788,7 +788,8 @@ void FusionRos::onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg) {
   // Only the images of the last seconds: the feeder makes a key frame when the image's motion arrives.
   const double t = msg->header.stamp.toSec();
   recent_images_[t] = msg;
-  while (!recent_images_.empty() && (recent_images_.begin()->first < t - 30.0 || recent_images_.size() > 500))
+  // Long enough for the registration's lag on a fast replay, short enough that HD images (~0.4 MB) stay few.
+  while (!recent_images_.empty() && (recent_images_.begin()->first < t - 10.0 || recent_images_.size() > 250))
     recent_images_.erase(recent_images_.begin());
 }
 

@@ -941,6 +941,10 @@ int TileWriterRos::adjustWrittenTiles() {
     const auto record = records_.find(which->second.first);
     // A tile drawn again meanwhile was measured in its previous version: its move waits for the next registration.
     if (record == records_.end() || record->second.version != which->second.second) continue;
+    // A move under the redraw threshold is the registration's noise: left out, so that the tiles settle.
+    const double half_diagonal_m = 0.5 * std::hypot(t.width_px, t.height_px) * t.gsd_m;
+    const double move_m = t.shift_en_m.norm() + std::hypot(t.rotation_rad, t.scale_change) * half_diagonal_m;
+    if (move_m <= config_.rerender_threshold_gsd * t.gsd_m) continue;
     tiles::applyTileAdjustment(&record->second, t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
     ++adjusted;
   }

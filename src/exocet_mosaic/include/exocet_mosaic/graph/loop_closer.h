@@ -41,6 +41,9 @@ struct LoopCloserConfig {
   int max_queue = 50;               ///< key frames waiting for the worker at most, >= 1
   int feature_cache_size = 32;      ///< key frames whose SIFT features are kept, >= 2
   int jpeg_quality = 90;            ///< of the kept key-frame images, [50, 100]
+  /// Key-frame images larger than this (larger side, px) are downscaled to it, [64, 100000]: an HD or 4K image's
+  /// SIFT pyramid takes hundreds of MB and seconds, and the loops' precision does not need its pixels.
+  int max_image_side_px = 1024;
   double idle_wait_s = 0.05;        ///< longest sleep of the worker between checks, > 0
   std::string validate() const;     ///< "" or each bad field with its allowed range
 };

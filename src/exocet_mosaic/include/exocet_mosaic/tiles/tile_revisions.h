@@ -101,8 +101,8 @@ void applyTileAdjustment(TileRecord* record, const Eigen::Vector2d& centre_en_m,
 struct RevisionConfig {
   /// 1-sigma of an image's navigation target (m): weighs the targets against the priors below, (0, 10].
   double target_sigma_m = 0.01;
-  double scale_prior_sigma = 0.01;     ///< prior 1-sigma of the tile's scale change, (0, 1]
-  double rotation_prior_sigma = 0.01;  ///< and of its rotation (rad), (0, 1]
+  double scale_prior_sigma = 0.002;     ///< prior 1-sigma of the tile's scale change, (0, 1]
+  double rotation_prior_sigma = 0.002;  ///< and of its rotation (rad), (0, 1]
   /// Each image's residual after the tile's similarity is averaged over this many neighbouring images (odd, [1,
   /// 101]) and applied to it: the tile bends with the graph without taking each pose's noise; 0: the similarity only.
   int residual_window_images = 5;

@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""Checks the tiles of a replay with the pose graph (run by tiles_graph_replay.test).
+
+The sample out-and-back dive is replayed through the chain with the fusion's pose graph and live loop closure. The
+checker plays the bag, flushes the tile writer, waits until no tile has been written or drawn again for a while
+(bounded), then reads the newest version of every tile: some were drawn again (version >= 2, announced on
+/mosaic/tile), and every pair of overlapping tiles, consecutive or return pass, agrees within 2 px.
+"""
+import atexit
+import os
+import signal
+import subprocess
+import time
+import unittest
+
+import rospy
+import rostest
+from exocet_msgs.msg import Tile as TileMsg
+from nav_msgs.msg import Odometry
+from std_srvs.srv import Trigger
+
+from exocet_mosaic import tile_analysis
+
+MAX_PAIR_PX = 2.0  # issue 20: every pair of overlapping live tiles, return passes included
+
+
+class TilesGraphReplayTest(unittest.TestCase):
+
+    def test_tiles_follow_the_graph(self):
+        rospy.init_node('check_tiles_graph_replay')
+        bag = rospy.get_param('~bag')
+        output_dir = rospy.get_param('~output_dir')
+        tiles_msgs, poses = [], []
+        rospy.Subscriber('/mosaic/tile', TileMsg, tiles_msgs.append, queue_size=200)
+        rospy.Subscriber('/mosaic/odometry', Odometry, poses.append, queue_size=1000)
+        time.sleep(1.0)
+        topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/nav/odometry', '/nav/usbl', '/nav/imu',
+                  '/nav/altitude', '/nav/datum', '/tf_static']
+        player = subprocess.Popen(['rosbag', 'play', '--clock', '-q', '-r', str(rospy.get_param('~rate')),
+                                   '--queue=1000', '--wait-for-subscribers', bag, '--topics'] + topics,
+                                  start_new_session=True)
+        atexit.register(lambda: player.poll() is None and os.killpg(player.pid, signal.SIGKILL))
+        last_count, last_change, start = -1, time.time(), time.time()
+        while time.time() - last_change < 30.0 and time.time() - start < 300.0:
+            if len(poses) != last_count:
+                last_count, last_change = len(poses), time.time()
+            if player.poll() is not None and time.time() - last_change > 4.0:
+                break
+            time.sleep(0.1)
+        rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
+        reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()
+        self.assertTrue(reply.success, reply.message)
+        # Settled: no tile written or drawn again for 12 s (the registration of the tiles runs every 5 s), at most 120 s.
+        last_count, last_change, start = len(tiles_msgs), time.time(), time.time()
+        while time.time() - last_change < 12.0 and time.time() - start < 120.0:
+            if len(tiles_msgs) != last_count:
+                last_count, last_change = len(tiles_msgs), time.time()
+            time.sleep(0.2)
+
+        firsts = [m for m in tiles_msgs if m.version == 1]
+        redrawn = [m for m in tiles_msgs if m.version >= 2]
+        self.assertGreaterEqual(len(firsts), 3, 'several tiles written')
+        self.assertTrue(redrawn, 'tiles drawn again as the graph moved their images')
+        for m in redrawn:
+            self.assertIn('_v%d.tif' % m.version, m.geotiff_path)
+        tiles = tile_analysis.read_tiles(output_dir)
+        self.assertEqual(len(tiles), len(firsts), 'one current version per tile on disk')
+        pairs = tile_analysis.overlapping_pair_shifts(tiles)
+        measured = [p for p in pairs if p.get('shift_px') is not None]
+        returns = [p for p in measured if not p['consecutive']]
+        self.assertTrue(returns, 'the return pass overlaps the outbound one')
+        worst = max(measured, key=lambda p: p['shift_px'])
+        rospy.loginfo('tiles_graph_replay: %d tiles, %d drawn again, %d pairs (%d return pass), worst %.2f px (%s, %s)',
+                      len(tiles), len(redrawn), len(measured), len(returns), worst['shift_px'], worst['a'], worst['b'])
+        self.assertLessEqual(worst['shift_px'], MAX_PAIR_PX,
+                             '%s and %s disagree by %.2f px' % (worst['a'], worst['b'], worst['shift_px']))
+
+
+if __name__ == '__main__':
+    rostest.rosrun('exocet_system_tests', 'tiles_graph_replay', TilesGraphReplayTest)
