@@ -73,6 +73,7 @@ int main(int argc, char** argv) {
   std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather";
   et::RevisionConfig revision;
   bool gain_compensation = true, tile_adjustment = true, lighting_correction = true;
+  int adjustment_passes = 1;
   CLI::App app(
       "Draws every tile of a dive again, per image, at the pose graph's final corrections: the records and images the\n"
       "tile writer kept in DIR/.exocet_images/ (~keep_images), the corrections it last received there\n"
@@ -87,6 +88,10 @@ int main(int argc, char** argv) {
   app.add_option("--corrections", corrections_path,
                  "graph corrections (CSV stamp_s,east_m,north_m); default DIR/.exocet_images/graph_corrections.csv")
       ->type_name("FILE.csv");
+  app.add_option("--adjustment-passes", adjustment_passes,
+                 "registrations of the tiles with each other, each on the tiles the previous one moved, [1, 10]")
+      ->check(CLI::Range(1, 10))
+      ->capture_default_str();
   app.add_option("--prefix", prefix, "file prefix of the tiles")->capture_default_str();
   app.add_option("--blend", blend, "feather | multiband | none")->capture_default_str();
   app.add_option("--residual-window", revision.residual_window_images,
@@ -158,10 +163,12 @@ int main(int argc, char** argv) {
   }
   int adjusted = 0;
   ec::JointTileGains joint;
-  if (tile_adjustment || gain_compensation) {
-    // First pass: the tiles at the graph, their levels for the gains, and in a scratch folder registered with each
-    // other.
-    const std::string scratch = output_dir + "/.recompose_graph_pass";
+  // Passes: the tiles drawn at the graph (and their adjustment so far) into a scratch folder, their levels kept for
+  // the gains, registered with each other; each pass's moves add up (the registration of tiles already moved
+  // measures what is left).
+  const int passes = tile_adjustment ? adjustment_passes : (gain_compensation ? 1 : 0);
+  for (int pass = 0; pass < passes; ++pass) {
+    const std::string scratch = output_dir + "/.recompose_pass";
     std::filesystem::remove_all(scratch, error);
     std::filesystem::create_directories(scratch, error);
     if (error) return badInput("cannot create '" + scratch + "': " + error.message());
@@ -174,27 +181,30 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < records.size(); ++k) {
       const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision, prepare);
       if (tile.raster.image.empty()) continue;
-      if (gain_compensation) joint.add(records[k].index, tile.raster);
+      if (gain_compensation && pass + 1 == passes) joint.add(records[k].index, tile.raster);
       if (!tile_adjustment) continue;
       const et::WrittenTile out = scratch_writer.writeAt(tile.raster, tile.record.metadata, records[k].index);
       if (out.ok) record_of_path[out.geotiff_path] = k;
     }
-    std::vector<std::string> paths;
-    for (const auto& [path, k] : record_of_path) paths.push_back(path);
     if (tile_adjustment) {
+      std::vector<std::string> paths;
+      for (const auto& [path, k] : record_of_path) paths.push_back(path);
       const et::TileAdjustmentResult network = et::measureAndSolve(paths, et::TileAdjustmentConfig());
       if (!network.ok) {
         std::cerr << "recompose_tiles: the tiles could not be registered with each other (" << network.error
                   << "): drawn at the graph only\n";
       } else {
+        double worst_px = 0;
+        for (const auto& pair : network.pairs)
+          worst_px = std::max(worst_px, pair.offset_en_m.norm() / network.tiles[pair.a].gsd_m);
         for (const et::AdjustedTile& t : network.tiles) {
           const auto k = record_of_path.find(t.path);
           if (k == record_of_path.end()) continue;
           et::applyTileAdjustment(&records[k->second], t.centre_en_m, t.shift_en_m, t.rotation_rad, t.scale_change);
-          ++adjusted;
+          if (pass == 0) ++adjusted;
         }
-        std::printf("recompose_tiles: %zu overlapping pairs registered, %d tiles adjusted\n", network.pairs.size(),
-                    adjusted);
+        std::printf("recompose_tiles: pass %d: %zu overlapping pairs registered, largest offset %.2f px\n", pass + 1,
+                    network.pairs.size(), worst_px);
       }
     }
     std::filesystem::remove_all(scratch, error);
