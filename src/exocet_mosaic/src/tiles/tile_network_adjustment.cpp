@@ -450,7 +450,9 @@ void writeAdjustedTiles(const std::string& output_dir, TileAdjustmentResult* res
     result->error = "output folder '" + output_dir + "' is not an existing folder";
     return;
   }
-  const std::regex tile_name(R"((.+)_([0-9]{4,})\.tif)");
+  // A tile drawn again (<prefix>_<NNNN>_v<K>.tif) is adjusted into <prefix>_<NNNN>.tif: the adjusted folder holds one
+  // version of each tile.
+  const std::regex tile_name(R"((.+)_([0-9]{4,})(_v[0-9]+)?\.tif)");
   for (const AdjustedTile& tile : result->tiles) {
     auto fail = [&](const std::string& why) {
       result->ok = false;
@@ -458,7 +460,7 @@ void writeAdjustedTiles(const std::string& output_dir, TileAdjustmentResult* res
     };
     const std::string name = baseName(tile.path);
     std::smatch match;
-    if (!std::regex_match(name, match, tile_name)) return fail("'" + tile.path + "' is not named <prefix>_NNNN.tif");
+    if (!std::regex_match(name, match, tile_name)) return fail("'" + tile.path + "' is not named <prefix>_NNNN[_vK].tif");
     const std::string folder = tile.path.substr(0, tile.path.size() - name.size());
     char resolved_in[PATH_MAX], resolved_out[PATH_MAX];
     if (::realpath((folder.empty() ? "." : folder).c_str(), resolved_in) &&
