@@ -16,9 +16,10 @@
  * changes with image_yaw_sigma_rad per pair. A registration failure (or an image the fusion could not convert: no
  * attitude, no height) leaves no image odometry across it: the next image starts a key frame tied to the last one by
  * the fused navigation's displacement between them, with the 1-sigma of the navigation's relative error over the gap
- * (gap_sigma_m + gap_drift_mps * its duration, gap_yaw_sigma_rad). A loose tie (a metre) let the part of the graph
- * after a one-second gap float on the fixes alone (0.5 m USBL: 0.2 m off on the tiles benchmark dive) while the
- * filter, across the same second, moved by its dead reckoning within centimetres.
+ * (gap_sigma_m + gap_drift_mps * its duration, gap_yaw_sigma_rad). A loose tie (a metre, or 5 cm + 5 cm/s) let the
+ * part of the graph after a one-second gap float on the fixes alone (0.5 m USBL: 0.2 m off on the tiles benchmark
+ * dive, 9 cm over 40 s of fixes in the test) while the filter, across the same second, moved by its dead reckoning
+ * within a centimetre or two.
  */
 #pragma once
 
@@ -40,11 +41,11 @@ struct KeyFrameFeederConfig {
   double keyframe_max_interval_s = 2.0;   ///< or the time since the last key frame (0, 3600] s
   double image_yaw_sigma_rad = 0.002;     ///< 1-sigma of one image pair's yaw change (0, 1] rad
   double odometry_floor_m = 0.002;        ///< 1-sigma added to each key-frame odometry, per axis [0, 10] m
-  /// 1-sigma of the fused displacement across a registration failure, per axis (0, 1000] m: the filter's jumps at
-  /// its fixes (a 0.5 m USBL fix moves a 7 cm filter by ~1 cm)...
-  double gap_sigma_m = 0.05;
-  /// ...plus its dead reckoning's drift over the gap's duration [0, 100] m/s (a DVL: ~1 % of 0.5 m/s, taken 10x).
-  double gap_drift_mps = 0.05;
+  /// 1-sigma of the fused displacement across a registration failure, per axis (0, 1000] m: the filter's jump at a
+  /// fix (a 0.5 m USBL fix moves a 7 cm filter by ~1 cm)...
+  double gap_sigma_m = 0.01;
+  /// ...plus its dead reckoning's drift over the gap's duration [0, 100] m/s (a DVL: ~1 % of 0.5 m/s, taken 2x).
+  double gap_drift_mps = 0.01;
   double gap_yaw_sigma_rad = 0.2;  ///< of its yaw (0, 10] rad
   std::string validate() const;
 };
