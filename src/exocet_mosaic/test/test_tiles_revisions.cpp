@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -18,6 +20,7 @@
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_mosaic/compose/ground_projection.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_mosaic_vrt.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
 
@@ -245,4 +248,38 @@ TEST(TileVersions, ANewVersionIsWrittenBesideTheOldOneWhichGoesAfter) {
   ASSERT_EQ(listed.size(), 2u);
   EXPECT_EQ(std::filesystem::path(listed[0]).filename().string(), "tile_0000_v2.tif");
   EXPECT_EQ(std::filesystem::path(listed[1]).filename().string(), "tile_0001.tif");
+}
+
+TEST(TileVersions, TheVirtualMosaicCoversTheNewestTilesAndSaysWhatIsWrong) {
+  TempDir dir;
+  et::TileWriterConfig config;
+  config.output_dir = dir.path();
+  et::GeoTiffTileWriter writer(config);
+  et::TileRaster raster;
+  raster.image = cv::Mat(40, 50, CV_8UC3, cv::Scalar(10, 20, 30));
+  raster.origin_easting_m = 500000.0;
+  raster.origin_northing_m = 4800000.0;
+  raster.gsd_m = kGsd;
+  ASSERT_TRUE(writer.write(raster, et::TileMetadata()).ok);
+  raster.origin_easting_m += 0.3;  // 30 px further east
+  ASSERT_TRUE(writer.writeVersion(raster, et::TileMetadata(), 0, 2).ok);
+  raster.origin_easting_m += 1.0;
+  ASSERT_TRUE(writer.write(raster, et::TileMetadata()).ok);
+  writer.removeVersion(0, 1);
+  const std::string vrt = dir.path() + "/tile_mosaic.vrt";
+  ASSERT_EQ(et::writeTileMosaicVrt(vrt, et::listTiles(dir.path())), "");
+  GDALAllRegister();
+  GDALDataset* dataset = static_cast<GDALDataset*>(GDALOpen(vrt.c_str(), GA_ReadOnly));
+  ASSERT_NE(dataset, nullptr);
+  double geo[6];
+  ASSERT_EQ(dataset->GetGeoTransform(geo), CE_None);
+  EXPECT_NEAR(geo[0], 500000.3, 1e-6);  // the first version is gone: the mosaic starts at the second
+  EXPECT_EQ(dataset->GetRasterXSize(), 150);  // 0.3 .. 1.8 m east
+  GDALClose(dataset);
+  // Relative to its folder: the tiles and their mosaic move together.
+  std::ifstream in(vrt);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("relativeToVRT=\"1\">tile_0000_v2.tif"), std::string::npos) << text.substr(0, 2000);
+  EXPECT_NE(et::writeTileMosaicVrt(vrt, {}).find("no tile"), std::string::npos);
+  EXPECT_NE(et::writeTileMosaicVrt(vrt, {dir.path() + "/missing.tif"}), "");
 }

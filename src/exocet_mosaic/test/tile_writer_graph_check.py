@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Feeds tile_writer_node (following the pose graph) synthetic frames of a nadir camera moving east, then graph
 corrections that move the whole dive 5 cm east: every written tile is drawn again, as version 2, 5 cm further east,
-announced on /mosaic/tile; its first version's file is gone, the new one is there; /diagnostics counts it."""
+announced on /mosaic/tile; its first version's file is gone, the new one is there; the folder's virtual mosaic
+(tile_mosaic.vrt) names the new versions; /diagnostics counts it."""
 import os
 import time
 import unittest
@@ -99,6 +100,20 @@ class TileWriterGraphTest(unittest.TestCase):
             self.assertAlmostEqual(new.min_easting_m - old.min_easting_m, MOVE_EAST_M, delta=1.01 * new.gsd_m)
             self.assertAlmostEqual(new.min_northing_m, old.min_northing_m, delta=1.01 * new.gsd_m)
             self.assertEqual(new.first_frame, old.first_frame)
+        # The GIS's one layer: the virtual mosaic names the new versions (rewritten at most every 2 s).
+        vrt = os.path.join(os.path.dirname(redrawn[min(redrawn)].geotiff_path), 'tile_mosaic.vrt')
+        deadline = time.time() + 10.0
+        names = []
+        while time.time() < deadline:
+            text = open(vrt).read() if os.path.exists(vrt) else ''
+            names = [os.path.basename(redrawn[i].geotiff_path) for i in first]
+            if all(n in text for n in names):
+                break
+            time.sleep(0.2)
+        text = open(vrt).read() if os.path.exists(vrt) else ''
+        for index, name in zip(first, names):
+            self.assertIn(name, text, 'tile_mosaic.vrt names version 2 of tile %d' % index)
+            self.assertNotIn(os.path.basename(first[index].geotiff_path) + '<', text)
         deadline = time.time() + 10.0
         counted = 0
         while time.time() < deadline and counted < len(first):

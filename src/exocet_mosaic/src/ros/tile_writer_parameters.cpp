@@ -109,6 +109,7 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readBool("keep_images", &c.keep_images, "keep the tiles' images for drawing them again");
   p.readInt("kept_image_quality", &c.kept_image_quality, 50, 100, "JPEG quality of the kept images");
   p.readBool("gain_compensation", &c.gain_compensation, "match each new tile's gains to the written tiles");
+  p.readBool("mosaic_vrt", &c.mosaic_vrt, "keep a GDAL virtual mosaic over the newest tiles");
   if (!c.graph_corrections_topic.empty()) c.keep_images = true;
   c.composer.keep_composed_images = c.keep_images;
   return c;

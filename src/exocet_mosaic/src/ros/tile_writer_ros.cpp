@@ -20,6 +20,7 @@
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
 #include "exocet_mosaic/tiles/closed_mosaic_tile.h"
+#include "exocet_mosaic/tiles/tile_mosaic_vrt.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
 
 namespace exocet_mosaic {
@@ -157,6 +158,7 @@ TileWriterRos::~TileWriterRos() {
   }
   write_cv_.notify_all();
   if (writer_thread_.joinable()) writer_thread_.join();
+  updateMosaicVrt(true);
   writeRunSummary();
 }
 
@@ -594,6 +596,9 @@ void TileWriterRos::writerLoop() {
         !failed_tiles_.empty() && (ros::WallTime::now() - last_retry).toSec() >= config_.retry_period_s;
     if (write_queue_.empty() && !retry_due) {
       if (stop_writer_) break;
+      lock.unlock();
+      updateMosaicVrt(false);  // a change the 2 s limit held back
+      lock.lock();
       continue;
     }
     PendingTile pending;
@@ -679,6 +684,10 @@ void TileWriterRos::writerLoop() {
              tile.width_px, tile.height_px, tile.gsd_m, tile.epsg, pending.mosaic.first_frame,
              pending.mosaic.last_frame, pending.mosaic.close_reason.c_str(), tile.write_ms);
     publishTile(tile, pending.mosaic);
+    vrt_stale_ = true;
+    lock.unlock();
+    updateMosaicVrt(false);
+    lock.lock();
     write_cv_.notify_all();
   }
 }
@@ -819,7 +828,26 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
   ROS_INFO("tile writer: %s drawn again (version %d, images moved by up to %.3f m) in %.0f ms",
            tile.geotiff_path.c_str(), tile.version, revision.moved_max_m, tile.write_ms);
   publishTile(tile, pending.mosaic);
+  vrt_stale_ = true;
+  lock.unlock();
+  updateMosaicVrt(false);
+  lock.lock();
   write_cv_.notify_all();
+}
+
+void TileWriterRos::updateMosaicVrt(bool now) {
+  if (!config_.mosaic_vrt || !vrt_stale_) return;
+  if (!now && (ros::WallTime::now() - last_vrt_wall_).toSec() < 2.0) return;
+  const std::vector<std::string> paths = tiles::listTiles(config_.files.output_dir);
+  if (paths.empty()) return;
+  const std::string vrt = config_.files.output_dir + "/" + config_.files.prefix + "_mosaic.vrt";
+  const std::string error = tiles::writeTileMosaicVrt(vrt, paths);
+  last_vrt_wall_ = ros::WallTime::now();
+  if (!error.empty()) {
+    ROS_WARN_THROTTLE(30.0, "tile writer: %s", error.c_str());
+    return;
+  }
+  vrt_stale_ = false;
 }
 
 void TileWriterRos::rerenderLoop() {

@@ -70,6 +70,9 @@ struct TileWriterNodeConfig {
   /// Gains of each new tile matched to the tiles already written where they overlap (compose::TileGainCompensator);
   /// a tile drawn again keeps its gains.
   bool gain_compensation = true;
+  /// <output_dir>/<prefix>_mosaic.vrt: a GDAL virtual mosaic over the newest version of every tile (one layer for a
+  /// GIS), rewritten atomically at most every 2 s as tiles are written or drawn again, and at shutdown.
+  bool mosaic_vrt = true;
 };
 
 /// @throws std::invalid_argument naming the parameter, its value and its allowed range.

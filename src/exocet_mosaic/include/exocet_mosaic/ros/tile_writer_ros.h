@@ -102,6 +102,8 @@ class TileWriterRos {
   /// now) and queues them for the writer; returns how many.
   int rerenderDue(bool every_tile = false);
   void saveCorrections();
+  /// Rewrites <output_dir>/<prefix>_mosaic.vrt (mosaic_vrt) when tiles changed, at most every 2 s unless `now`.
+  void updateMosaicVrt(bool now);
   /// Registers the written tiles with each other and adds each one's move to its record (the next look draws them
   /// again); nothing while a tile waits to be written. Returns how many tiles it adjusted.
   int adjustWrittenTiles();
@@ -191,6 +193,8 @@ class TileWriterRos {
   double last_rerender_ms_ = 0, max_tile_move_m_ = 0;
   std::string last_rerender_problem_;
   bool tiles_changed_since_adjustment_ = false;  ///< write_mutex_
+  bool vrt_stale_ = false;                        ///< writer thread
+  ros::WallTime last_vrt_wall_;
   std::int64_t tile_adjustments_ = 0;
   double last_adjustment_pair_max_px_ = 0;
 
