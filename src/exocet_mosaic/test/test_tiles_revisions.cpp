@@ -60,6 +60,22 @@ et::TileRecord lineTile(int n, const Eigen::Vector2d& nav_offset = Eigen::Vector
   return r;
 }
 
+et::GeoTiffTileWriter writerIn(const TempDir& dir) {
+  et::TileWriterConfig config;
+  config.output_dir = dir.path();
+  return et::GeoTiffTileWriter(config);
+}
+
+/// A 50 x 40 px uniform tile at (500000, 4800000), GSD kGsd.
+et::TileRaster plainRaster() {
+  et::TileRaster raster;
+  raster.image = cv::Mat(40, 50, CV_8UC3, cv::Scalar(10, 20, 30));
+  raster.origin_easting_m = 500000.0;
+  raster.origin_northing_m = 4800000.0;
+  raster.gsd_m = kGsd;
+  return raster;
+}
+
 et::PositionCorrectionTrack constantTrack(const Eigen::Vector2d& c) {
   et::PositionCorrectionTrack track;
   track.set({0.0, 1000.0}, {c, c});
@@ -212,14 +228,8 @@ TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
 
 TEST(TileVersions, ANewVersionIsWrittenBesideTheOldOneWhichGoesAfter) {
   TempDir dir;
-  et::TileWriterConfig config;
-  config.output_dir = dir.path();
-  et::GeoTiffTileWriter writer(config);
-  et::TileRaster raster;
-  raster.image = cv::Mat(40, 50, CV_8UC3, cv::Scalar(10, 20, 30));
-  raster.origin_easting_m = 500000.0;
-  raster.origin_northing_m = 4800000.0;
-  raster.gsd_m = kGsd;
+  et::GeoTiffTileWriter writer = writerIn(dir);
+  et::TileRaster raster = plainRaster();
   et::TileMetadata metadata;
   const et::WrittenTile first = writer.write(raster, metadata);
   ASSERT_TRUE(first.ok) << first.error;
@@ -252,14 +262,8 @@ TEST(TileVersions, ANewVersionIsWrittenBesideTheOldOneWhichGoesAfter) {
 
 TEST(TileVersions, TheVirtualMosaicCoversTheNewestTilesAndSaysWhatIsWrong) {
   TempDir dir;
-  et::TileWriterConfig config;
-  config.output_dir = dir.path();
-  et::GeoTiffTileWriter writer(config);
-  et::TileRaster raster;
-  raster.image = cv::Mat(40, 50, CV_8UC3, cv::Scalar(10, 20, 30));
-  raster.origin_easting_m = 500000.0;
-  raster.origin_northing_m = 4800000.0;
-  raster.gsd_m = kGsd;
+  et::GeoTiffTileWriter writer = writerIn(dir);
+  et::TileRaster raster = plainRaster();
   ASSERT_TRUE(writer.write(raster, et::TileMetadata()).ok);
   raster.origin_easting_m += 0.3;  // 30 px further east
   ASSERT_TRUE(writer.writeVersion(raster, et::TileMetadata(), 0, 2).ok);

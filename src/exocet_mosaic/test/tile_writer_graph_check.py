@@ -14,7 +14,7 @@ from exocet_msgs.msg import ImageMotion, PositionCorrections, Tile
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image, Range
 
-from tile_writer_node_check import FOCAL_PX, GSD_M, HEIGHT, HEIGHT_M, STEP_PX, WIDTH, seabed
+from tile_writer_node_check import publish_frames
 
 MOVE_EAST_M = 0.05
 
@@ -37,46 +37,31 @@ class TileWriterGraphTest(unittest.TestCase):
                                           or odometry.get_num_connections() == 0
                                           or corrections.get_num_connections() == 0):
             time.sleep(0.1)
-        texture = seabed()
         start = rospy.Time(1000.0)
-        previous = None
         frames = 32
-        for i in range(frames):
-            stamp = start + rospy.Duration(0.2 * i)
-            image = Image()
-            image.header.stamp = stamp
-            image.header.frame_id = 'camera_optical'
-            image.height, image.width, image.encoding, image.step = HEIGHT, WIDTH, 'mono8', WIDTH
-            image.data = texture[20:20 + HEIGHT, i * STEP_PX:i * STEP_PX + WIDTH].tobytes()
-            images.publish(image)
-            if previous is not None:
-                motion = ImageMotion()
-                motion.header.stamp = stamp
-                motion.previous_stamp = previous
-                motion.method, motion.model = 'klt', 'translation'
-                motion.matrix = [1, 0, -STEP_PX, 0, 1, 0, 0, 0, 1]
-                motion.camera_matrix = [FOCAL_PX, 0, WIDTH / 2.0, 0, FOCAL_PX, HEIGHT / 2.0, 0, 0, 1]
-                motion.parameters, motion.covariance = [-STEP_PX, 0.0], [0.01, 0, 0, 0.01]
-                motions.publish(motion)
-            pose = Odometry()
-            pose.header.stamp = stamp
-            pose.header.frame_id = 'utm'
-            pose.pose.pose.position.x = 500000.0 + i * STEP_PX * GSD_M
-            pose.pose.pose.position.y = 4700000.0
-            pose.pose.pose.orientation.x, pose.pose.pose.orientation.w = 1.0, 0.0
-            pose.pose.covariance[0] = pose.pose.covariance[7] = 0.01
-            odometry.publish(pose)
-            height = Range()
-            height.header.stamp = stamp
-            height.range = HEIGHT_M
-            heights.publish(height)
-            previous = stamp
-            time.sleep(0.02)
+        publish_frames({'images': images, 'motions': motions, 'odometry': odometry, 'heights': heights}, frames,
+                       start)
         deadline = time.time() + 20.0
         while time.time() < deadline and len(tiles) < 2:
             time.sleep(0.1)
         first = {t.index: t for t in tiles if t.version == 1}
         self.assertGreaterEqual(len(first), 2, 'tiles written before the graph moves them')
+
+        # Bad input first: stamps and values of different lengths. Refused and counted; nothing is drawn again.
+        bad = PositionCorrections()
+        bad.header.frame_id = 'utm'
+        bad.stamps = [start, start + rospy.Duration(1.0)]
+        bad.east_m, bad.north_m = [MOVE_EAST_M], [0.0, 0.0]
+        corrections.publish(bad)
+        time.sleep(2.0)
+        self.assertFalse([t for t in tiles if t.version > 1], 'refused corrections move nothing')
+        rejected = 0
+        for s in list(statuses):
+            values = {kv.key: kv.value for kv in s.values}
+            rejected = max(rejected, int(values.get('images rejected', 0)))
+            if 'differ in length' in values.get('last problem', ''):
+                rejected = max(rejected, 1)
+        self.assertGreaterEqual(rejected, 1, 'the refused corrections are counted on /diagnostics')
 
         # The graph now puts the whole dive 5 cm further east.
         msg = PositionCorrections()

@@ -28,6 +28,55 @@ def seabed(seed=3):
     return (255 * (smooth - smooth.min()) / np.ptp(smooth)).astype(np.uint8)
 
 
+def publish_frames(publishers, count, start, bad_pose_at=None, bad_image_at=None):
+    """Publishes `count` frames of a nadir camera moving east over seabed(), 0.2 s apart from `start`: the image, its
+    motion from the previous one, the fused pose (NaN at bad_pose_at) and the camera height; at bad_image_at a corrupt
+    JPEG on the compressed stream. publishers: dict of images, compressed, motions, odometry, heights."""
+    texture = seabed()
+    previous = None
+    for i in range(count):
+        stamp = start + rospy.Duration(0.2 * i)
+        image = Image()
+        image.header.stamp = stamp
+        image.header.frame_id = 'camera_optical'
+        image.height, image.width, image.encoding, image.step = HEIGHT, WIDTH, 'mono8', WIDTH
+        image.data = texture[20:20 + HEIGHT, i * STEP_PX:i * STEP_PX + WIDTH].tobytes()
+        publishers['images'].publish(image)
+        if previous is not None:
+            motion = ImageMotion()
+            motion.header.stamp = stamp
+            motion.previous_stamp = previous
+            motion.method, motion.model = 'klt', 'translation'
+            # The camera moves east (image x right = east with the nadir pose below): the seabed moves left.
+            motion.matrix = [1, 0, -STEP_PX, 0, 1, 0, 0, 0, 1]
+            motion.camera_matrix = [FOCAL_PX, 0, WIDTH / 2.0, 0, FOCAL_PX, HEIGHT / 2.0, 0, 0, 1]
+            motion.parameters, motion.covariance = [-STEP_PX, 0.0], [0.01, 0, 0, 0.01]
+            publishers['motions'].publish(motion)
+        pose = Odometry()
+        pose.header.stamp = stamp
+        pose.header.frame_id = 'utm'
+        pose.pose.pose.position.x = 500000.0 + i * STEP_PX * GSD_M
+        pose.pose.pose.position.y = 4700000.0
+        # Nadir camera, image top = north: x_cam = east, y_cam = south, z_cam = down (a rotation of pi about x).
+        pose.pose.pose.orientation.x, pose.pose.pose.orientation.w = 1.0, 0.0
+        pose.pose.covariance[0] = pose.pose.covariance[7] = 0.01
+        if i == bad_pose_at:
+            pose.pose.pose.position.x = float('nan')  # bad input: rejected, counted
+        publishers['odometry'].publish(pose)
+        height = Range()
+        height.header.stamp = stamp
+        height.range = HEIGHT_M
+        publishers['heights'].publish(height)
+        previous = stamp
+        if i == bad_image_at:
+            bad = CompressedImage()
+            bad.header.stamp = stamp + rospy.Duration(0.1)
+            bad.format = 'jpeg'
+            bad.data = b'not a jpeg at all'
+            publishers['compressed'].publish(bad)  # ignored: the node listens to the raw stream it received first
+        time.sleep(0.02)
+
+
 class TileWriterNodeTest(unittest.TestCase):
 
     def test_bad_input_and_unwritable_folder(self):
@@ -46,50 +95,8 @@ class TileWriterNodeTest(unittest.TestCase):
         while time.time() < deadline and (images.get_num_connections() == 0 or motions.get_num_connections() == 0
                                           or odometry.get_num_connections() == 0):
             time.sleep(0.1)
-        texture = seabed()
-        start = rospy.Time(1000.0)
-        previous = None
-        for i in range(40):
-            stamp = start + rospy.Duration(0.2 * i)
-            image = Image()
-            image.header.stamp = stamp
-            image.header.frame_id = 'camera_optical'
-            image.height, image.width, image.encoding, image.step = HEIGHT, WIDTH, 'mono8', WIDTH
-            image.data = texture[20:20 + HEIGHT, i * STEP_PX:i * STEP_PX + WIDTH].tobytes()
-            images.publish(image)
-            if previous is not None:
-                motion = ImageMotion()
-                motion.header.stamp = stamp
-                motion.previous_stamp = previous
-                motion.method, motion.model = 'klt', 'translation'
-                # The camera moves east (image x right = east with the nadir pose below): the seabed moves left.
-                motion.matrix = [1, 0, -STEP_PX, 0, 1, 0, 0, 0, 1]
-                motion.camera_matrix = [FOCAL_PX, 0, WIDTH / 2.0, 0, FOCAL_PX, HEIGHT / 2.0, 0, 0, 1]
-                motion.parameters, motion.covariance = [-STEP_PX, 0.0], [0.01, 0, 0, 0.01]
-                motions.publish(motion)
-            pose = Odometry()
-            pose.header.stamp = stamp
-            pose.header.frame_id = 'utm'
-            pose.pose.pose.position.x = 500000.0 + i * STEP_PX * GSD_M
-            pose.pose.pose.position.y = 4700000.0
-            # Nadir camera, image top = north: x_cam = east, y_cam = south, z_cam = down (a rotation of pi about x).
-            pose.pose.pose.orientation.x, pose.pose.pose.orientation.w = 1.0, 0.0
-            pose.pose.covariance[0] = pose.pose.covariance[7] = 0.01
-            if i == 7:
-                pose.pose.pose.position.x = float('nan')  # bad input: rejected, counted
-            odometry.publish(pose)
-            height = Range()
-            height.header.stamp = stamp
-            height.range = HEIGHT_M
-            heights.publish(height)
-            previous = stamp
-            if i == 5:
-                bad = CompressedImage()
-                bad.header.stamp = stamp + rospy.Duration(0.1)
-                bad.format = 'jpeg'
-                bad.data = b'not a jpeg at all'
-                compressed.publish(bad)  # ignored: the node listens to the raw stream it received first
-            time.sleep(0.02)
+        publish_frames({'images': images, 'compressed': compressed, 'motions': motions, 'odometry': odometry,
+                        'heights': heights}, 40, rospy.Time(1000.0), bad_pose_at=7, bad_image_at=5)
         time.sleep(1.0)
         rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
         reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()

@@ -136,21 +136,14 @@ TileWriterRos::~TileWriterRos() {
   if (rerender_thread_.joinable()) rerender_thread_.join();
   if (!config_.graph_corrections_topic.empty()) {
     // The tiles as the last corrections place them: the written ones first, then one last look.
-    {
-      std::unique_lock<std::mutex> lock(write_mutex_);
-      write_cv_.wait_for(lock, std::chrono::seconds(120), [this]() { return write_queue_.empty() && !writing_; });
-    }
+    waitWriterIdle(120.0);
     rerenderDue(true);
     saveCorrections();
     if (config_.tile_adjustment_period_s > 0.0) {
-      {
-        std::unique_lock<std::mutex> lock(write_mutex_);
-        write_cv_.wait_for(lock, std::chrono::seconds(300), [this]() { return write_queue_.empty() && !writing_; });
-      }
+      waitWriterIdle(300.0);
       if (adjustWrittenTiles() > 0) rerenderDue();
     }
-    std::unique_lock<std::mutex> lock(write_mutex_);
-    write_cv_.wait_for(lock, std::chrono::seconds(300), [this]() { return write_queue_.empty() && !writing_; });
+    waitWriterIdle(300.0);
   }
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
@@ -752,13 +745,23 @@ std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pe
     }
     record.images.push_back(kept);
   }
+  saveRecord(record, writer);
+  return record;
+}
+
+void TileWriterRos::saveRecord(const tiles::TileRecord& record, const tiles::GeoTiffTileWriter& writer) {
   try {
-    exocet_common::writeJsonFileAtomically(images_dir_ + "/" + writer.baseName(tile.index) + ".json",
+    exocet_common::writeJsonFileAtomically(images_dir_ + "/" + writer.baseName(record.index) + ".json",
                                            tiles::tileRecordToJson(record));
   } catch (const std::exception& e) {
-    ROS_WARN_THROTTLE(10.0, "tile writer: record of tile %d not kept: %s", tile.index, e.what());
+    ROS_WARN_THROTTLE(10.0, "tile writer: record of tile %d not kept: %s", record.index, e.what());
   }
-  return record;
+}
+
+void TileWriterRos::waitWriterIdle(double timeout_s) {
+  std::unique_lock<std::mutex> lock(write_mutex_);
+  write_cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
+                     [this]() { return write_queue_.empty() && !writing_; });
 }
 
 namespace {
@@ -800,12 +803,7 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
   if (tile.ok) {
     // The previous version goes once the new one is complete.
     writer->removeVersion(record.index, record.version - 1);
-    try {
-      exocet_common::writeJsonFileAtomically(images_dir_ + "/" + writer->baseName(record.index) + ".json",
-                                             tiles::tileRecordToJson(record));
-    } catch (const std::exception& e) {
-      ROS_WARN_THROTTLE(10.0, "tile writer: record of tile %d not kept: %s", record.index, e.what());
-    }
+    saveRecord(record, *writer);
   }
   lock.lock();
   writing_ = false;

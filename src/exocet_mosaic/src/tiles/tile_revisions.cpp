@@ -301,9 +301,10 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
   return out;
 }
 
-double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack& track,
-                         const RevisionConfig& config) {
-  const std::vector<cv::Matx33d> placements = placementsAt(record, track, config);
+namespace {
+
+/// Largest move of the images' corners from the record's current placements to `placements`.
+double largestCornerMoveM(const TileRecord& record, const std::vector<cv::Matx33d>& placements) {
   double moved = 0;
   for (std::size_t i = 0; i < placements.size(); ++i) {
     const RecordedImage& image = record.images[i];
@@ -317,15 +318,22 @@ double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack
   return moved;
 }
 
+}  // namespace
+
+double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack& track,
+                         const RevisionConfig& config) {
+  return largestCornerMoveM(record, placementsAt(record, track, config));
+}
+
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
                          compose::PlacedImageRenderConfig render, const RevisionConfig& config,
                          const std::function<cv::Mat(const cv::Mat&)>& prepare) {
   RevisedTile out;
   out.record = record;
   out.record.version = record.version + 1;
-  out.moved_max_m = tileDisplacementM(record, track, config);
   render.gsd_m = record.gsd_m;
   const std::vector<cv::Matx33d> placements = placementsAt(record, track, config);
+  out.moved_max_m = largestCornerMoveM(record, placements);
   std::vector<compose::PlacedImage> placed;
   for (std::size_t i = 0; i < placements.size(); ++i) {
     RecordedImage& image = out.record.images[i];

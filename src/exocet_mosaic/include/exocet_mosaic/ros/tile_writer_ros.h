@@ -102,6 +102,10 @@ class TileWriterRos {
   /// now) and queues them for the writer; returns how many.
   int rerenderDue(bool every_tile = false);
   void saveCorrections();
+  /// <images_dir_>/<prefix>_NNNN.json, atomically; a failure is logged (the tile stays, not its redrawing).
+  void saveRecord(const tiles::TileRecord& record, const tiles::GeoTiffTileWriter& writer);
+  /// Waits until the writer thread has nothing queued nor in hand, at most timeout_s.
+  void waitWriterIdle(double timeout_s);
   /// Rewrites <output_dir>/<prefix>_mosaic.vrt (mosaic_vrt) when tiles changed, at most every 2 s unless `now`.
   void updateMosaicVrt(bool now);
   /// Registers the written tiles with each other and adds each one's move to its record (the next look draws them
