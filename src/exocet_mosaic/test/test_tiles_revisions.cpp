@@ -190,6 +190,14 @@ TEST(TileRevisions, TheTileDrawnAgainIsTheSamePixelsMovedByTheCorrection) {
   EXPECT_LE(worst, 1.0);
   // The pixel grid stays on multiples of the GSD (versions and neighbours share it).
   EXPECT_NEAR(std::remainder(moved.raster.origin_easting_m, kGsd), 0.0, 1e-6);
+  // Each image is drawn with its own gain (after the lighting): one image at 0.5 darkens its part only.
+  et::TileRecord dimmed = record;
+  for (auto& image : dimmed.images) image.gain = {0.5, 0.5, 0.5};
+  const et::RevisedTile dark = et::renderTileAt(dimmed, constantTrack(Eigen::Vector2d::Zero()), dir.path(), render);
+  ASSERT_EQ(dark.raster.image.size(), same.raster.image.size());
+  EXPECT_NEAR(cv::mean(dark.raster.image, dark.raster.mask)[1], 0.5 * cv::mean(same.raster.image, same.raster.mask)[1],
+              1.0);
+  EXPECT_EQ(dark.record.images[0].gain[1], 0.5);
   // An image that cannot be read is left out and said.
   std::filesystem::remove(dir.path() + "/" + record.images[2].file);
   const et::RevisedTile missing = et::renderTileAt(record, constantTrack(move), dir.path(), render);
@@ -200,6 +208,7 @@ TEST(TileRevisions, TheTileDrawnAgainIsTheSamePixelsMovedByTheCorrection) {
 TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
   et::TileRecord record = lineTile(3);
   record.images[1].closed_navigation_m.reset();
+  record.images[2].gain = {1.1, 0.9, 1.05};
   record.metadata.extra["blend"] = "feather";
   const et::TileRecord back = et::tileRecordFromJson(et::tileRecordToJson(record));
   ASSERT_EQ(back.images.size(), 3u);
@@ -207,6 +216,8 @@ TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
   EXPECT_FALSE(back.images[1].closed_navigation_m.has_value());
   EXPECT_NEAR((*back.images[2].closed_navigation_m - *record.images[2].closed_navigation_m).norm(), 0.0, 1e-12);
   EXPECT_EQ(back.images[2].file, record.images[2].file);
+  EXPECT_EQ(back.images[2].gain, record.images[2].gain);
+  EXPECT_EQ(back.images[0].gain, (std::array<double, 3>{1.0, 1.0, 1.0}));  // no gain written: 1
   EXPECT_EQ(back.metadata.extra.at("blend"), "feather");
   nlohmann::json bad = et::tileRecordToJson(record);
   bad["images"][0]["file"] = "../escape.jpg";
@@ -215,6 +226,14 @@ TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
     FAIL() << "a path in an image file name was accepted";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("plain name"), std::string::npos) << e.what();
+  }
+  bad = et::tileRecordToJson(record);
+  bad["images"][2]["gain"] = {1.0, -1.0, 1.0};
+  try {
+    et::tileRecordFromJson(bad);
+    FAIL() << "a negative gain was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("gain"), std::string::npos) << e.what();
   }
   bad = et::tileRecordToJson(record);
   bad.erase("gsd_m");

@@ -129,8 +129,7 @@ cv::Mat LightingCorrector::fieldAt(const cv::Size& image_size) const {
   return out;
 }
 
-cv::Mat LightingCorrector::gainMap() const {
-  if (gain_version_ == version_ && !gain_.empty()) return gain_;
+cv::Mat LightingCorrector::smallGain() const {
   const cv::Mat f = field();
   std::vector<cv::Mat> planes;
   cv::split(f, planes);
@@ -146,12 +145,26 @@ cv::Mat LightingCorrector::gainMap() const {
     cv::max(g, min_gain, g);
     p = g;
   }
-  cv::Mat small_gain, full;
+  cv::Mat small_gain;
   cv::merge(planes, small_gain);
-  cv::resize(small_gain, full, image_size_, 0, 0, cv::INTER_LINEAR);
+  return small_gain;
+}
+
+cv::Mat LightingCorrector::gainMap() const {
+  if (gain_version_ == version_ && !gain_.empty()) return gain_;
+  cv::Mat full;
+  cv::resize(smallGain(), full, image_size_, 0, 0, cv::INTER_LINEAR);
   gain_ = full;
   gain_version_ = version_;
   return gain_;
+}
+
+cv::Mat LightingCorrector::gainGrid(const cv::Size& image_size, const cv::Size& grid) const {
+  if (!ready() || image_size != image_size_ || grid.width < 1 || grid.height < 1) return cv::Mat();
+  // The full-size gain is the working one upsampled linearly: its block means are the working one's area means.
+  cv::Mat out;
+  cv::resize(smallGain(), out, grid, 0, 0, cv::INTER_AREA);
+  return out;
 }
 
 cv::Mat LightingCorrector::correct(const cv::Mat& image) const {

@@ -109,8 +109,13 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readBool("keep_images", &c.keep_images, "keep the tiles' images for drawing them again");
   p.readInt("kept_image_quality", &c.kept_image_quality, 50, 100, "JPEG quality of the kept images");
   p.readBool("gain_compensation", &c.gain_compensation, "match each new tile's gains to the written tiles");
+  p.readBool("image_gain_compensation", &c.image_gain_compensation,
+             "solve a gain per kept image over all overlaps and draw the tiles again with them");
+  p.readDouble("image_gain_redraw_change", &c.image_gain_redraw_change, 0.001, 1.0,
+               "relative change of an image's gain that makes its tile drawn again");
   p.readBool("mosaic_vrt", &c.mosaic_vrt, "keep a GDAL virtual mosaic over the newest tiles");
   if (!c.graph_corrections_topic.empty()) c.keep_images = true;
+  if (!c.keep_images) c.image_gain_compensation = false;  // the gains draw the kept images
   c.composer.keep_composed_images = c.keep_images;
   return c;
 }

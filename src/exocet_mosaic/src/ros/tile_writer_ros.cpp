@@ -110,7 +110,8 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
       [this](exocet_mosaic::TileWriterConfig& c, uint32_t level) { onReconfigure(c, level); });
 
   writer_thread_ = std::thread([this]() { writerLoop(); });
-  if (!config_.graph_corrections_topic.empty()) rerender_thread_ = std::thread([this]() { rerenderLoop(); });
+  redraws_ = !config_.graph_corrections_topic.empty() || config_.image_gain_compensation;
+  if (redraws_) rerender_thread_ = std::thread([this]() { rerenderLoop(); });
   flush_srv_ = private_nh_.advertiseService("flush", &TileWriterRos::onFlush, this);
 
   updater_.setHardwareID("tile writer " + config_.files.output_dir);
@@ -134,12 +135,12 @@ TileWriterRos::~TileWriterRos() {
   }
   rerender_cv_.notify_all();
   if (rerender_thread_.joinable()) rerender_thread_.join();
-  if (!config_.graph_corrections_topic.empty()) {
-    // The tiles as the last corrections place them: the written ones first, then one last look.
+  if (redraws_) {
+    // The tiles as the last corrections and gains place them: the written ones first, then one last look.
     waitWriterIdle(120.0);
     rerenderDue(true);
     saveCorrections();
-    if (config_.tile_adjustment_period_s > 0.0) {
+    if (!config_.graph_corrections_topic.empty() && config_.tile_adjustment_period_s > 0.0) {
       waitWriterIdle(300.0);
       if (adjustWrittenTiles() > 0) rerenderDue();
     }
@@ -744,6 +745,12 @@ std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pe
       continue;
     }
     record.images.push_back(kept);
+    if (config_.image_gain_compensation) {
+      const compose::ImageGainsConfig& g = image_gains_.config();
+      compose::ImageLevels levels = compose::imageLevels(image.image, g.grid_columns, g.grid_rows);
+      std::lock_guard<std::mutex> lock(image_gains_mutex_);
+      if (image_gains_.add(kept.file, std::move(levels))) ++image_levels_added_;
+    }
   }
   saveRecord(record, writer);
   return record;
@@ -791,10 +798,15 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
   const tiles::TileRecord& record = revision.record;
   writing_ = true;
   lock.unlock();
-  // Matched again to the others as they are now (its lighting and place changed; its own record left out).
-  std::optional<compose::TileGains> gains =
-      config_.gain_compensation ? std::optional<compose::TileGains>(gains_.estimate(revision.raster, record.index))
-                                : std::nullopt;
+  // Matched again to the others as they are now (its lighting and place changed; its own record left out), unless its
+  // images carry their own gains: then its levels are kept as drawn, for the new tiles to match.
+  std::optional<compose::TileGains> gains;
+  if (config_.gain_compensation && !config_.image_gain_compensation) {
+    gains = gains_.estimate(revision.raster, record.index);
+  } else if (config_.gain_compensation) {
+    gains = compose::TileGains();
+    gains->channels = revision.raster.image.channels();
+  }
   if (gains && gains->channels == revision.raster.image.channels())
     revision.raster = compose::TileGainCompensator::apply(revision.raster, *gains);
   const tiles::WrittenTile tile = writer->writeVersion(revision.raster, record.metadata, record.index, record.version);
@@ -859,12 +871,12 @@ void TileWriterRos::rerenderLoop() {
     if (stop_rerender_) break;
     lock.unlock();
     rerenderDue();
-    if (config_.tile_adjustment_period_s > 0.0 &&
+    if (!config_.graph_corrections_topic.empty() && config_.tile_adjustment_period_s > 0.0 &&
         (ros::WallTime::now() - last_adjustment).toSec() >= config_.tile_adjustment_period_s) {
       last_adjustment = ros::WallTime::now();
       if (adjustWrittenTiles() > 0) rerenderDue();
     }
-    if ((ros::WallTime::now() - last_save).toSec() > 10.0) {
+    if (!config_.graph_corrections_topic.empty() && (ros::WallTime::now() - last_save).toSec() > 10.0) {
       saveCorrections();
       last_save = ros::WallTime::now();
     }
@@ -880,30 +892,54 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     track = corrections_;
     received = corrections_received_;
   }
-  if (track.empty() && !every_tile) return 0;
-  std::vector<tiles::TileRecord> due;
-  {
-    std::lock_guard<std::mutex> lock(write_mutex_);
-    for (const auto& [index, record] : records_) {
-      if (revision_pending_.count(index)) continue;
-      const auto failed = revision_failed_at_.find(index);
-      if (failed != revision_failed_at_.end() && failed->second == received) continue;  // same corrections failed
-      const double moved_m = tiles::tileDisplacementM(record, track);
-      max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
-      if (every_tile || moved_m > config_.rerender_threshold_gsd * record.gsd_m) due.push_back(record);
-    }
-  }
-  compose::PlacedImageRenderConfig render;
-  render.blend = config_.composer.blend;
-  render.feather_power = config_.composer.feather_power;
-  render.multiband_bands = config_.composer.multiband_bands;
-  if (due.empty()) return 0;
+  if (track.empty() && !every_tile && !config_.image_gain_compensation) return 0;
   // The images are kept before the lighting correction: corrected with the field as it is now.
   std::shared_ptr<compose::LightingCorrector> lighting;
   {
     std::lock_guard<std::mutex> lock(compose_mutex_);
     lighting = std::make_shared<compose::LightingCorrector>(composer_.lightingSnapshot());
   }
+  std::optional<std::map<std::string, std::array<double, 3>>> gains;
+  if (config_.image_gain_compensation) gains = solveImageGains(*lighting, every_tile);
+  const auto gain_change = [&](const tiles::RecordedImage& image) {
+    const auto g = gains->find(image.file);
+    const std::array<double, 3> now = g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+    double change = 0;
+    for (int c = 0; c < 3; ++c) change = std::max(change, std::abs(now[c] / image.gain[c] - 1.0));
+    return change;
+  };
+  std::vector<tiles::TileRecord> due;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    for (const auto& [index, record] : records_) {
+      if (revision_pending_.count(index)) continue;
+      bool relit = false;
+      if (gains)
+        for (const tiles::RecordedImage& image : record.images)
+          relit = relit || gain_change(image) > config_.image_gain_redraw_change;
+      // Drawing it failed with these corrections: tried again with the next ones, or new gains (solved only when
+      // images were added).
+      const auto failed = revision_failed_at_.find(index);
+      if (failed != revision_failed_at_.end() && failed->second == received && !relit) continue;
+      const double moved_m = track.empty() ? 0.0 : tiles::tileDisplacementM(record, track);
+      max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
+      if (every_tile || relit || moved_m > config_.rerender_threshold_gsd * record.gsd_m) {
+        due.push_back(record);
+        if (relit && !every_tile && moved_m <= config_.rerender_threshold_gsd * record.gsd_m) ++tiles_redrawn_for_gains_;
+      }
+    }
+  }
+  if (due.empty()) return 0;
+  if (gains)
+    for (tiles::TileRecord& record : due)
+      for (tiles::RecordedImage& image : record.images) {
+        const auto g = gains->find(image.file);
+        image.gain = g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+      }
+  compose::PlacedImageRenderConfig render;
+  render.blend = config_.composer.blend;
+  render.feather_power = config_.composer.feather_power;
+  render.multiband_bands = config_.composer.multiband_bands;
   const auto prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
   int queued = 0;
   for (const tiles::TileRecord& record : due) {
@@ -932,6 +968,35 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     ++queued;
   }
   return queued;
+}
+
+std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solveImageGains(
+    const compose::LightingCorrector& lighting, bool always) {
+  {
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    if (!always && image_levels_added_ == image_levels_solved_) return image_gain_;
+  }
+  std::map<std::string, compose::ImagePlacement> placements;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    const cv::Size grid(image_gains_.config().grid_columns, image_gains_.config().grid_rows);
+    for (const auto& [index, record] : records_) tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  compose::ImageGainSolution solution;
+  {
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    image_levels_solved_ = image_levels_added_;
+    solution = image_gains_.solve(placements);
+  }
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  if (solution.problem.empty()) image_gain_ = std::move(solution.gain);
+  solution.gain.clear();
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  ++image_gain_solves_;
+  last_image_gain_ms_ = ms;
+  last_image_gains_ = solution;
+  return image_gain_;
 }
 
 int TileWriterRos::adjustWrittenTiles() {
@@ -1156,7 +1221,17 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     std::lock_guard<std::mutex> lock(write_mutex_);
     status.add("images kept", images_kept_);
     status.add("images not kept", images_not_kept_);
-    if (!config_.graph_corrections_topic.empty()) {
+    if (config_.image_gain_compensation) {
+      status.add("image gain solves", image_gain_solves_);
+      status.add("images with a gain", last_image_gains_.images);
+      status.add("overlapping image pairs", last_image_gains_.pairs);
+      status.addf("largest level step between images (grey, before -> after their gains)", "%.1f -> %.1f",
+                  last_image_gains_.step_before_grey, last_image_gains_.step_after_grey);
+      status.addf("last image gain solve (ms)", "%.1f", last_image_gain_ms_);
+      status.add("tiles drawn again for their gains", tiles_redrawn_for_gains_);
+      if (!last_image_gains_.problem.empty()) status.add("image gains not solved", last_image_gains_.problem);
+    }
+    if (redraws_) {
       status.add("tiles drawn again", tiles_rerendered_);
       status.add("tiles waiting to be drawn again", revision_pending_.size());
       status.add("failures drawing a tile again", rerender_failures_);

@@ -88,6 +88,7 @@ nlohmann::json tileRecordToJson(const TileRecord& r) {
                             {"ground_from_px", matrixJson(i.ground_from_px)}};
     if (i.closed_navigation_m)
       image["closed_navigation_m"] = {i.closed_navigation_m->x(), i.closed_navigation_m->y()};
+    if (i.gain != std::array<double, 3>{1.0, 1.0, 1.0}) image["gain"] = i.gain;
     images.push_back(image);
   }
   j["images"] = images;
@@ -151,6 +152,12 @@ TileRecord tileRecordFromJson(const nlohmann::json& j) {
     image.closed_correction_m = pointField(i, "closed_correction_m");
     if (i.contains("closed_navigation_m")) image.closed_navigation_m = pointField(i, "closed_navigation_m");
     image.ground_from_px = matrixField(i, "ground_from_px");
+    if (i.contains("gain")) {
+      image.gain = field<std::array<double, 3>>(i, "gain");
+      for (double g : image.gain)
+        if (!(g > 0.0 && std::isfinite(g)))
+          throw std::invalid_argument("tile record: an image's gain must hold 3 finite numbers > 0");
+    }
     r.images.push_back(image);
   }
   if (j.contains("adjustment")) r.adjustment = matrixField(j, "adjustment");
@@ -325,6 +332,29 @@ double tileDisplacementM(const TileRecord& record, const PositionCorrectionTrack
   return largestCornerMoveM(record, placementsAt(record, track, config));
 }
 
+void addImagePlacements(const TileRecord& record, const std::vector<cv::Matx33d>& ground_from_px,
+                        const compose::LightingCorrector* lighting, const cv::Size& grid,
+                        std::map<std::string, compose::ImagePlacement>* placements) {
+  const cv::Matx33d en_from_ground(1, 0, record.ground_origin_en_m.x(), 0, 1, record.ground_origin_en_m.y(), 0, 0, 1);
+  for (std::size_t i = 0; i < record.images.size(); ++i) {
+    const RecordedImage& image = record.images[i];
+    compose::ImagePlacement p;
+    p.en_from_px = en_from_ground * (i < ground_from_px.size() ? ground_from_px[i] : image.ground_from_px);
+    if (lighting) p.block_gain = lighting->gainGrid(cv::Size(image.width_px, image.height_px), grid);
+    (*placements)[image.file] = p;
+  }
+}
+
+cv::Mat withGain(const cv::Mat& image, const std::array<double, 3>& gain) {
+  if (image.empty() || image.depth() != CV_8U) return image;
+  cv::Mat out;
+  if (image.channels() == 3)
+    cv::multiply(image, cv::Scalar(gain[0], gain[1], gain[2]), out);
+  else
+    image.convertTo(out, -1, gain[0]);
+  return out;
+}
+
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
                          compose::PlacedImageRenderConfig render, const RevisionConfig& config,
                          const std::function<cv::Mat(const cv::Mat&)>& prepare) {
@@ -344,7 +374,9 @@ RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack
       out.problem = "image " + images_dir + "/" + image.file + " cannot be read: left out";
       continue;
     }
-    placed.push_back({prepare ? prepare(pixels) : pixels, image.ground_from_px});
+    cv::Mat drawn = prepare ? prepare(pixels) : pixels;
+    if (image.gain != std::array<double, 3>{1.0, 1.0, 1.0}) drawn = withGain(drawn, image.gain);
+    placed.push_back({drawn, image.ground_from_px});
   }
   const compose::PlacedRaster drawn = compose::renderPlacedImages(placed, record.ground_origin_en_m, render);
   if (drawn.image.empty()) {

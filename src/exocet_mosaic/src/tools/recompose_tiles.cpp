@@ -1,8 +1,9 @@
 // recompose_tiles: after the dive, draws every tile again from its images at the pose graph's final corrections
 // (tiles/tile_revisions.h: each image placed by its tile's chain, carried onto the graph per image), then registers
 // the overlapping tiles so drawn with each other and moves each by one similarity (tile_network_adjustment.h, what
-// adjust_tiles does) before drawing it a last time from its images, with the tiles' gains solved jointly over the
-// dive (joint_tile_gains.h) and the lighting field of the whole dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
+// adjust_tiles does) before drawing it a last time from its images, with the images' gains solved jointly over the
+// dive (image_gains.h; --gain-model tile: one gain per tile, joint_tile_gains.h; opencv: OpenCV's stitcher's
+// per-image, per-channel compensator, for comparison) and the lighting field of the whole dive. Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the
 // last graph corrections it received (graph_corrections.csv there, or --corrections). The live tiles are kept.
 //   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
 // Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.
@@ -20,9 +21,12 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/stitching/detail/exposure_compensate.hpp>
 
 #include "exocet_common/command_line.h"
 #include "exocet_common/json_file.h"
+#include "exocet_mosaic/compose/image_gains.h"
 #include "exocet_mosaic/compose/joint_tile_gains.h"
 #include "exocet_mosaic/compose/lighting_corrector.h"
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
@@ -67,10 +71,49 @@ et::PositionCorrectionTrack readCorrections(const std::string& path) {
   return track;
 }
 
+/// Per image file, each channel's gain from OpenCV's stitcher's ChannelsCompensator (Brown & Lowe per channel), fed
+/// with the images corrected for the lighting and warped at a coarse ground sample distance onto one UTM grid.
+std::map<std::string, std::array<double, 3>> openCvGains(const std::map<std::string, ec::ImagePlacement>& placements,
+                                                         const std::string& records_dir,
+                                                         const std::function<cv::Mat(const cv::Mat&)>& prepare,
+                                                         double gsd_m) {
+  std::vector<std::string> files;
+  std::vector<cv::Point> corners;
+  std::vector<cv::UMat> images;
+  std::vector<std::pair<cv::UMat, uchar>> masks;
+  for (const auto& [file, placement] : placements) {
+    cv::Mat pixels = cv::imread(records_dir + "/" + file, cv::IMREAD_COLOR);
+    if (pixels.empty()) continue;
+    if (prepare) pixels = prepare(pixels);
+    // grid px (x east, y south, origin UTM (0, 0)) <- image px
+    const cv::Matx33d grid_from_en(1 / gsd_m, 0, 0, 0, -1 / gsd_m, 0, 0, 0, 1);
+    const cv::Matx33d h = grid_from_en * placement.en_from_px;
+    std::vector<cv::Point2d> c = {{0, 0}, {double(pixels.cols), 0}, {double(pixels.cols), double(pixels.rows)},
+                                  {0, double(pixels.rows)}};
+    cv::perspectiveTransform(c, c, h);
+    const cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(c.begin(), c.end()));
+    const cv::Matx33d shift(1, 0, -box.x, 0, 1, -box.y, 0, 0, 1);
+    cv::Mat warped, mask;
+    cv::warpPerspective(pixels, warped, shift * h, box.size(), cv::INTER_AREA);
+    cv::warpPerspective(cv::Mat(pixels.size(), CV_8U, cv::Scalar(255)), mask, shift * h, box.size(), cv::INTER_NEAREST);
+    files.push_back(file);
+    corners.push_back(box.tl());
+    images.push_back(warped.getUMat(cv::ACCESS_READ).clone());
+    masks.emplace_back(mask.getUMat(cv::ACCESS_READ).clone(), 255);
+  }
+  cv::detail::ChannelsCompensator compensator;
+  compensator.feed(corners, images, masks);
+  std::map<std::string, std::array<double, 3>> out;
+  const std::vector<cv::Scalar> gains = compensator.gains();
+  for (std::size_t i = 0; i < files.size() && i < gains.size(); ++i)
+    out[files[i]] = {gains[i][0], gains[i][1], gains[i][2]};
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather";
+  std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather", gain_model = "image";
   et::RevisionConfig revision;
   bool gain_compensation = true, tile_adjustment = true, lighting_correction = true;
   int adjustment_passes = 1;
@@ -98,6 +141,11 @@ int main(int argc, char** argv) {
                  "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
       ->capture_default_str();
   app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
+  app.add_option("--gain-model", gain_model,
+                 "image: a gain per image and channel over the dive's overlaps; tile: one per tile and channel; "
+                 "opencv: OpenCV's stitcher's per-image, per-channel compensator (for comparison)")
+      ->check(CLI::IsMember({"image", "tile", "opencv"}))
+      ->capture_default_str();
   app.add_flag("!--no-lighting", lighting_correction,
                "draw the images as kept (the tile writer keeps them before its lighting correction)");
   app.add_flag("!--no-tile-adjustment", tile_adjustment,
@@ -147,14 +195,21 @@ int main(int argc, char** argv) {
   // observed once, then each corrected with it.
   auto lighting = std::make_shared<ec::LightingCorrector>();
   std::function<cv::Mat(const cv::Mat&)> prepare;
-  if (lighting_correction) {
+  ec::ImageGains image_gains;
+  const bool per_image_gains = gain_compensation && gain_model == "image";
+  const cv::Size gain_grid(image_gains.config().grid_columns, image_gains.config().grid_rows);
+  if (lighting_correction || per_image_gains) {
     int observed = 0;
     for (const et::TileRecord& record : records)
       for (const et::RecordedImage& image : record.images) {
+        if (image_gains.contains(image.file)) continue;  // consecutive tiles share an image
         const cv::Mat pixels = cv::imread(records_dir + "/" + image.file, cv::IMREAD_UNCHANGED);
-        if (!pixels.empty() && lighting->observe(pixels)) ++observed;
+        if (pixels.empty()) continue;
+        if (lighting_correction && lighting->observe(pixels)) ++observed;
+        if (per_image_gains) image_gains.add(image.file, ec::imageLevels(pixels, gain_grid.width, gain_grid.height));
       }
-    if (lighting->ready()) {
+    if (!lighting_correction) {
+    } else if (lighting->ready()) {
       prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
       std::printf("recompose_tiles: lighting field from %d images\n", observed);
     } else {
@@ -166,7 +221,7 @@ int main(int argc, char** argv) {
   // Passes: the tiles drawn at the graph (and their adjustment so far) into a scratch folder, their levels kept for
   // the gains, registered with each other; each pass's moves add up (the registration of tiles already moved
   // measures what is left).
-  const int passes = tile_adjustment ? adjustment_passes : (gain_compensation ? 1 : 0);
+  const int passes = tile_adjustment ? adjustment_passes : (gain_compensation && gain_model == "tile" ? 1 : 0);
   for (int pass = 0; pass < passes; ++pass) {
     const std::string scratch = output_dir + "/.recompose_pass";
     std::filesystem::remove_all(scratch, error);
@@ -181,7 +236,7 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < records.size(); ++k) {
       const et::RevisedTile tile = et::renderTileAt(records[k], track, records_dir, render, revision, prepare);
       if (tile.raster.image.empty()) continue;
-      if (gain_compensation && pass + 1 == passes) joint.add(records[k].index, tile.raster);
+      if (gain_compensation && gain_model == "tile" && pass + 1 == passes) joint.add(records[k].index, tile.raster);
       if (!tile_adjustment) continue;
       const et::WrittenTile out = scratch_writer.writeAt(tile.raster, tile.record.metadata, records[k].index);
       if (out.ok) record_of_path[out.geotiff_path] = k;
@@ -215,6 +270,32 @@ int main(int argc, char** argv) {
   files.prefix = prefix;
   et::GeoTiffTileWriter writer(files);
   const std::map<int, std::array<double, 3>> solved_gains = joint.solve();
+  if (gain_compensation && gain_model != "tile") {
+    // Each image's gain, from where the final drawing puts it.
+    std::map<std::string, ec::ImagePlacement> placements;
+    for (const et::TileRecord& record : records)
+      et::addImagePlacements(record, et::placementsAt(record, track, revision), prepare ? lighting.get() : nullptr,
+                             gain_grid, &placements);
+    std::map<std::string, std::array<double, 3>> gain_of_file;
+    if (gain_model == "image") {
+      const ec::ImageGainSolution solution = image_gains.solve(placements);
+      if (!solution.problem.empty())
+        std::cerr << "recompose_tiles: no image gains (" << solution.problem << "): drawn with gain 1\n";
+      else
+        std::printf("recompose_tiles: gains of %zu images over %d overlapping pairs (%.2f m cells): largest level step "
+                    "%.1f -> %.1f grey\n", solution.gain.size(), solution.pairs, solution.cell_size_m,
+                    solution.step_before_grey, solution.step_after_grey);
+      gain_of_file = solution.gain;
+    } else {
+      gain_of_file = openCvGains(placements, records_dir, prepare, 4.0 * records.front().gsd_m);
+      std::printf("recompose_tiles: OpenCV's compensator: gains of %zu images\n", gain_of_file.size());
+    }
+    for (et::TileRecord& record : records)
+      for (et::RecordedImage& image : record.images) {
+        const auto g = gain_of_file.find(image.file);
+        if (g != gain_of_file.end()) image.gain = g->second;
+      }
+  }
   nlohmann::ordered_json json;
   json["tiles"] = nlohmann::ordered_json::array();
   int written = 0, failed = 0;
@@ -227,7 +308,7 @@ int main(int argc, char** argv) {
     }
     ec::TileGains g;
     g.channels = tile.raster.image.channels();
-    if (gain_compensation) {
+    if (gain_compensation && gain_model == "tile") {
       const auto solved = solved_gains.find(record.index);
       if (solved != solved_gains.end()) g.gain = g.far_gain = solved->second;
       tile.raster = ec::TileGainCompensator::apply(tile.raster, g);

@@ -74,12 +74,19 @@ class LightingCorrector {
   /// The field resampled to the image size (CV_32FC(channels)); empty if nothing observed.
   cv::Mat fieldAt(const cv::Size& image_size) const;
 
+  /**
+   * @brief The gain correct() applies, averaged over each block of a grid of `grid` blocks laid on an image of
+   * `image_size` (CV_32FC(channels)): the levels of an image summarised by blocks, corrected. Empty when the field is
+   * not ready or is of another image size.
+   */
+  cv::Mat gainGrid(const cv::Size& image_size, const cv::Size& grid) const;
   void reset();
   /// A deep copy (the field's data is not shared): for another thread to correct images with the field as it is now.
   LightingCorrector clone() const;
 
  private:
-  cv::Mat gainMap() const;  // full-size CV_32FC(n) gains, cached per field version
+  cv::Mat smallGain() const;  // the gains at the working resolution, CV_32FC(n)
+  cv::Mat gainMap() const;    // full-size CV_32FC(n) gains, cached per field version
 
   LightingConfig config_;
   cv::Mat mean_;  // running mean at the working resolution, CV_32FC(n)

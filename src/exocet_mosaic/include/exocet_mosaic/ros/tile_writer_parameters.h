@@ -70,6 +70,12 @@ struct TileWriterNodeConfig {
   /// Gains of each new tile matched to the tiles already written where they overlap (compose::TileGainCompensator);
   /// a tile drawn again keeps its gains.
   bool gain_compensation = true;
+  /// With keep_images: a gain per kept image and channel solved over all their overlaps in the background
+  /// (compose::ImageGains, every rerender_period_s when images were added); a written tile is drawn again (a new
+  /// version) when its images' gains changed by more than image_gain_redraw_change, and a tile drawn again then takes
+  /// its images' gains instead of a tile gain.
+  bool image_gain_compensation = true;
+  double image_gain_redraw_change = 0.01;  ///< relative change of an image's gain, [0.001, 1]
   /// <output_dir>/<prefix>_mosaic.vrt: a GDAL virtual mosaic over the newest version of every tile (one layer for a
   /// GIS), rewritten atomically at most every 2 s as tiles are written or drawn again, and at shutdown.
   bool mosaic_vrt = true;

@@ -15,6 +15,10 @@
  * ~rerender_threshold_gsd; the writer thread writes it as the tile's next version, removes the previous one once the
  * new one is complete, and announces it like a new tile (Tile message with its version, UDP, footprints). At
  * shutdown the tiles are brought to the last corrections received.
+ *
+ * With ~image_gain_compensation (and kept images, with or without the graph) the same thread solves a gain per kept
+ * image over every overlap (compose::ImageGains) and draws a tile again when its images' gains changed: the levels of
+ * one pass and the next, which a gain per tile cannot match along a whole tile, are matched per image.
  */
 #pragma once
 
@@ -101,6 +105,10 @@ class TileWriterRos {
   /// Draws again the written tiles the corrections moved (every tile: all of them, with the lighting field as it is
   /// now) and queues them for the writer; returns how many.
   int rerenderDue(bool every_tile = false);
+  /// Rerender thread: solves the images' gains when images were added since the last solve (or `always`) at their
+  /// current placements and the lighting given; @return the new gains per image file, nullopt if not solved.
+  std::optional<std::map<std::string, std::array<double, 3>>> solveImageGains(
+      const compose::LightingCorrector& lighting, bool always);
   void saveCorrections();
   /// <images_dir_>/<prefix>_NNNN.json, atomically; a failure is logged (the tile stays, not its redrawing).
   void saveRecord(const tiles::TileRecord& record, const tiles::GeoTiffTileWriter& writer);
@@ -201,6 +209,16 @@ class TileWriterRos {
   ros::WallTime last_vrt_wall_;
   std::int64_t tile_adjustments_ = 0;
   double last_adjustment_pair_max_px_ = 0;
+  bool redraws_ = false;  ///< the rerender thread runs (graph corrections, or image gains)
+  // Gains of the kept images.
+  std::mutex image_gains_mutex_;
+  compose::ImageGains image_gains_;        ///< levels of the kept images (image_gains_mutex_)
+  std::int64_t image_levels_added_ = 0;    ///< (image_gains_mutex_)
+  std::int64_t image_levels_solved_ = -1;  ///< rerender thread
+  std::map<std::string, std::array<double, 3>> image_gain_;  ///< last solution by image file (rerender thread)
+  compose::ImageGainSolution last_image_gains_;               ///< its figures, gains left out (write_mutex_)
+  double last_image_gain_ms_ = 0;                             ///< (write_mutex_)
+  std::int64_t image_gain_solves_ = 0, tiles_redrawn_for_gains_ = 0;  ///< (write_mutex_)
 
   // Counters for /diagnostics.
   std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;

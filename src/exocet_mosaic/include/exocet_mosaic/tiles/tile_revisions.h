@@ -11,7 +11,9 @@
  */
 #pragma once
 
+#include <array>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -20,6 +22,8 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "exocet_mosaic/compose/image_gains.h"
+#include "exocet_mosaic/compose/lighting_corrector.h"
 #include "exocet_mosaic/compose/placed_image_renderer.h"
 #include "exocet_mosaic/tiles/tile_raster.h"
 
@@ -57,6 +61,9 @@ struct RecordedImage {
   /// Where the image's fused pose put its centre then (same ground frame, the correction included); none: no pose.
   std::optional<Eigen::Vector2d> closed_navigation_m;
   cv::Matx33d ground_from_px = cv::Matx33d::eye();  ///< as the tile's current version drew it
+  /// Gain per channel (BGR; grey: [0]) the image is drawn with after the lighting correction: its share of the
+  /// dive's gain compensation (compose::ImageGains); 1 until one is solved.
+  std::array<double, 3> gain{1.0, 1.0, 1.0};
 };
 
 /// What a written tile is made of.
@@ -134,9 +141,22 @@ struct RevisedTile {
 };
 
 /**
+ * @brief Adds each image of the record to `placements` (keyed by its file) for compose::ImageGains::solve(): where it
+ * lies, in UTM, at `ground_from_px` (one per image in the record's order; empty: as the current version drew it), and
+ * the gain the lighting correction gives its blocks (`lighting` null or not ready: none).
+ */
+void addImagePlacements(const TileRecord& record, const std::vector<cv::Matx33d>& ground_from_px,
+                        const compose::LightingCorrector* lighting, const cv::Size& grid,
+                        std::map<std::string, compose::ImagePlacement>* placements);
+
+/// The image (8-bit, 1 or 3 channels) times a gain per channel, saturated; other images unchanged.
+cv::Mat withGain(const cv::Mat& image, const std::array<double, 3>& gain);
+
+/**
  * @brief Draws the tile at placementsAt(), the images read from `images_dir`, on the same GSD grid.
  * @param render blending; its gsd_m is replaced by the record's.
- * @param prepare applied to each image read before it is drawn (the lighting correction); none: drawn as read
+ * @param prepare applied to each image read before it is drawn (the lighting correction); none: drawn as read.
+ * Each image is then multiplied by its RecordedImage::gain.
  */
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
                          compose::PlacedImageRenderConfig render, const RevisionConfig& config = RevisionConfig(),
