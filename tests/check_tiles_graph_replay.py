@@ -4,7 +4,8 @@
 The sample out-and-back dive is replayed through the chain with the fusion's pose graph and live loop closure. The
 checker plays the bag, flushes the tile writer, waits until no tile has been written or drawn again for a while
 (bounded), then reads the newest version of every tile: some were drawn again (version >= 2, announced on
-/mosaic/tile), and every pair of overlapping tiles, consecutive or return pass, agrees within 2 px.
+/mosaic/tile), every pair of overlapping tiles, consecutive or return pass, agrees within 2 px, and their mean
+levels on their common pixels within 3 grey levels (the images' gains, solved over their overlaps).
 """
 import atexit
 import os
@@ -22,6 +23,7 @@ from std_srvs.srv import Trigger
 from exocet_mosaic import tile_analysis
 
 MAX_PAIR_PX = 2.0  # issue 20: every pair of overlapping live tiles, return passes included
+MAX_LEVEL_STEP_GREY = 3.0  # issue 20: mean-level difference between overlapping tiles
 
 
 class TilesGraphReplayTest(unittest.TestCase):
@@ -74,6 +76,18 @@ class TilesGraphReplayTest(unittest.TestCase):
                       len(tiles), len(redrawn), len(measured), len(returns), worst['shift_px'], worst['a'], worst['b'])
         self.assertLessEqual(worst['shift_px'], MAX_PAIR_PX,
                              '%s and %s disagree by %.2f px' % (worst['a'], worst['b'], worst['shift_px']))
+        by_name = {t.name: t for t in tiles}
+        steps = []
+        for p in measured:
+            colour = tile_analysis.pair_colour_difference(by_name[p['a']], by_name[p['b']], p['dx_px'], p['dy_px'])
+            if colour is not None:
+                steps.append((abs(colour['level_step_grey']), p['a'], p['b']))
+        self.assertTrue(steps, 'the level of overlapping tiles measured')
+        step = max(steps)
+        rospy.loginfo('tiles_graph_replay: largest level step %.2f grey (%s, %s) over %d pairs', step[0], step[1],
+                      step[2], len(steps))
+        self.assertLessEqual(step[0], MAX_LEVEL_STEP_GREY,
+                             '%s and %s differ in level by %.2f grey' % (step[1], step[2], step[0]))
 
 
 if __name__ == '__main__':
