@@ -67,9 +67,17 @@ namespace {
 
 struct PairSums {
   int cells = 0;
-  std::array<double, 3> log_ratio{0, 0, 0};  // sum over cells of log(level_b / level_a)
+  std::array<std::vector<float>, 3> log_ratio;  // per common cell, log(level_b / level_a)
   std::array<double, 3> level_a{0, 0, 0}, level_b{0, 0, 0};
 };
+
+/// The median of v (reordered).
+double median(std::vector<float>& v) {
+  const std::size_t h = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + h, v.end());
+  if (v.size() % 2 == 1) return v[h];
+  return 0.5 * (v[h] + *std::max_element(v.begin(), v.begin() + h));
+}
 
 std::uint64_t cellKey(double e, double n, double size) {
   const auto ix = static_cast<std::int64_t>(std::floor(e / size));
@@ -185,7 +193,7 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
         PairSums& p = pairs[(static_cast<std::uint64_t>(a) << 32) | static_cast<std::uint64_t>(b)];
         ++p.cells;
         for (int ch = 0; ch < nc; ++ch) {
-          p.log_ratio[ch] += ratio[ch];
+          p.log_ratio[ch].push_back(static_cast<float>(ratio[ch]));
           p.level_a[ch] += la[ch] / la[3];
           p.level_b[ch] += lb[ch] / lb[3];
         }
@@ -196,8 +204,8 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
   // (the image's common cells) / gain_sigma^2.
   const int n = static_cast<int>(placed.size());
   std::vector<double> image_cells(n, 0.0);
-  std::vector<std::pair<std::pair<int, int>, const PairSums*>> used;
-  for (const auto& [key, p] : pairs) {
+  std::vector<std::pair<std::pair<int, int>, PairSums*>> used;
+  for (auto& [key, p] : pairs) {
     if (p.cells < config_.min_common_cells) continue;
     const int a = static_cast<int>(key >> 32), b = static_cast<int>(key & 0xffffffffULL);
     used.push_back({{a, b}, &p});
@@ -228,11 +236,17 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
     out.problem = "the gains' normal equations could not be factorised";
     return out;
   }
+  // Each pair's ratio: the median over its common cells (a cell where the texture under a coarse placement, a
+  // shadow or a fish differs is not a level).
+  std::vector<std::array<double, 3>> pair_ratio(used.size(), std::array<double, 3>{0, 0, 0});
+  for (std::size_t i = 0; i < used.size(); ++i)
+    for (int ch = 0; ch < nc; ++ch) pair_ratio[i][ch] = median(used[i].second->log_ratio[ch]);
   std::vector<std::array<double, 3>> gains(n, std::array<double, 3>{1.0, 1.0, 1.0});
   for (int ch = 0; ch < nc; ++ch) {
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
-    for (const auto& [ab, p] : used) {
-      const double r = p->log_ratio[ch] / p->cells;
+    for (std::size_t i = 0; i < used.size(); ++i) {
+      const auto& [ab, p] = used[i];
+      const double r = pair_ratio[i][ch];
       rhs[ab.first] += wc * p->cells * r;
       rhs[ab.second] -= wc * p->cells * r;
     }

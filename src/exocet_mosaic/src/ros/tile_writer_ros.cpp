@@ -909,6 +909,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     return change;
   };
   std::vector<tiles::TileRecord> due;
+  std::vector<bool> keep_placements;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     for (const auto& [index, record] : records_) {
@@ -923,9 +924,13 @@ int TileWriterRos::rerenderDue(bool every_tile) {
       if (failed != revision_failed_at_.end() && failed->second == received && !relit) continue;
       const double moved_m = track.empty() ? 0.0 : tiles::tileDisplacementM(record, track);
       max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
-      if (every_tile || relit || moved_m > config_.rerender_threshold_gsd * record.gsd_m) {
+      const bool moved = moved_m > config_.rerender_threshold_gsd * record.gsd_m;
+      if (every_tile || relit || moved) {
         due.push_back(record);
-        if (relit && !every_tile && moved_m <= config_.rerender_threshold_gsd * record.gsd_m) ++tiles_redrawn_for_gains_;
+        // Without the graph, or not moved by it: drawn where it is (placementsAt() would fit it to the navigation
+        // again, without the tie to its neighbours the composer gave it).
+        keep_placements.push_back(track.empty() || (!moved && !every_tile));
+        if (relit && !every_tile && !moved) ++tiles_redrawn_for_gains_;
       }
     }
   }
@@ -942,10 +947,14 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   render.multiband_bands = config_.composer.multiband_bands;
   const auto prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
   int queued = 0;
-  for (const tiles::TileRecord& record : due) {
+  for (std::size_t k = 0; k < due.size(); ++k) {
+    const tiles::TileRecord& record = due[k];
     const auto start = std::chrono::steady_clock::now();
+    std::vector<cv::Matx33d> current;
+    for (const tiles::RecordedImage& image : record.images) current.push_back(image.ground_from_px);
     tiles::RevisedTile revision =
-        tiles::renderTileAt(record, track, images_dir_, render, tiles::RevisionConfig(), prepare);
+        keep_placements[k] ? tiles::renderTileWith(record, current, images_dir_, render, prepare)
+                           : tiles::renderTileAt(record, track, images_dir_, render, tiles::RevisionConfig(), prepare);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     std::lock_guard<std::mutex> lock(write_mutex_);
     last_rerender_ms_ = ms;

@@ -358,11 +358,21 @@ cv::Mat withGain(const cv::Mat& image, const std::array<double, 3>& gain) {
 RevisedTile renderTileAt(const TileRecord& record, const PositionCorrectionTrack& track, const std::string& images_dir,
                          compose::PlacedImageRenderConfig render, const RevisionConfig& config,
                          const std::function<cv::Mat(const cv::Mat&)>& prepare) {
+  return renderTileWith(record, placementsAt(record, track, config), images_dir, render, prepare);
+}
+
+RevisedTile renderTileWith(const TileRecord& record, const std::vector<cv::Matx33d>& placements,
+                           const std::string& images_dir, compose::PlacedImageRenderConfig render,
+                           const std::function<cv::Mat(const cv::Mat&)>& prepare) {
   RevisedTile out;
   out.record = record;
   out.record.version = record.version + 1;
   render.gsd_m = record.gsd_m;
-  const std::vector<cv::Matx33d> placements = placementsAt(record, track, config);
+  if (placements.size() != record.images.size()) {
+    out.problem = "placements for " + std::to_string(placements.size()) + " images, the tile has " +
+                  std::to_string(record.images.size());
+    return out;
+  }
   out.moved_max_m = largestCornerMoveM(record, placements);
   std::vector<compose::PlacedImage> placed;
   for (std::size_t i = 0; i < placements.size(); ++i) {

@@ -141,6 +141,10 @@ int main(int argc, char** argv) {
                  "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
       ->capture_default_str();
   app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
+  ec::ImageGainsConfig image_gain_config;
+  app.add_option("--image-gain-min-cells", image_gain_config.min_common_cells,
+                 "common ground cells for a pair of images to be compared, [1, 100000]")
+      ->capture_default_str();
   app.add_option("--gain-model", gain_model,
                  "image: a gain per image and channel over the dive's overlaps; tile: one per tile and channel; "
                  "opencv: OpenCV's stitcher's per-image, per-channel compensator (for comparison)")
@@ -195,7 +199,9 @@ int main(int argc, char** argv) {
   // observed once, then each corrected with it.
   auto lighting = std::make_shared<ec::LightingCorrector>();
   std::function<cv::Mat(const cv::Mat&)> prepare;
-  ec::ImageGains image_gains;
+  const std::string bad_gains = image_gain_config.validate();
+  if (!bad_gains.empty()) return badInput(bad_gains);
+  ec::ImageGains image_gains(image_gain_config);
   const bool per_image_gains = gain_compensation && gain_model == "image";
   const cv::Size gain_grid(image_gains.config().grid_columns, image_gains.config().grid_rows);
   if (lighting_correction || per_image_gains) {
@@ -216,6 +222,9 @@ int main(int argc, char** argv) {
       std::cerr << "recompose_tiles: too few images (" << observed << ") for a lighting field: drawn as kept\n";
     }
   }
+  if (gain_model != "image")  // the peers' gains replace the images' own, which the live tile writer may have set
+    for (et::TileRecord& record : records)
+      for (et::RecordedImage& image : record.images) image.gain = {1.0, 1.0, 1.0};
   int adjusted = 0;
   ec::JointTileGains joint;
   // Passes: the tiles drawn at the graph (and their adjustment so far) into a scratch folder, their levels kept for

@@ -153,6 +153,15 @@ void addImagePlacements(const TileRecord& record, const std::vector<cv::Matx33d>
 cv::Mat withGain(const cv::Mat& image, const std::array<double, 3>& gain);
 
 /**
+ * @brief Draws the tile's images at the given placements (one ground_from_px per image, the record's order; the
+ * record's current ones for a tile drawn again only for its images' gains), read from `images_dir`, on the same GSD
+ * grid; `prepare` and the gains as renderTileAt().
+ */
+RevisedTile renderTileWith(const TileRecord& record, const std::vector<cv::Matx33d>& placements,
+                           const std::string& images_dir, compose::PlacedImageRenderConfig render,
+                           const std::function<cv::Mat(const cv::Mat&)>& prepare = nullptr);
+
+/**
  * @brief Draws the tile at placementsAt(), the images read from `images_dir`, on the same GSD grid.
  * @param render blending; its gsd_m is replaced by the record's.
  * @param prepare applied to each image read before it is drawn (the lighting correction); none: drawn as read.
