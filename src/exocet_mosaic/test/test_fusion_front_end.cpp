@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <map>
+#include <memory>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -84,6 +85,39 @@ TEST(FusionFrontEnd, TheFirstDeadReckoningStartsTheFilterAtTheCameraAndTheNextIs
   ASSERT_TRUE(second.update.has_value());
   EXPECT_EQ(second.update->status, UpdateStatus::kApplied) << second.update->detail;
   EXPECT_TRUE(second.started_from.empty());
+}
+
+TEST(FusionFrontEnd, TheFilterWaitsForTheCameraMountAndTheAttitudeBeforeStartingFromTheNavigation) {
+  // /tf_static late (a loaded machine, a node restarted): started at base_link, the filter would carry the 0.5 m
+  // lever arm as an error until the fixes removed it.
+  auto mounts = std::make_shared<std::map<std::string, Eigen::Isometry3d>>();
+  FusionFrontEnd front(FusionFrontEndConfig(), [mounts](const std::string& frame) -> std::optional<Eigen::Isometry3d> {
+    const auto it = mounts->find(frame);
+    if (it == mounts->end()) return std::nullopt;
+    return it->second;
+  });
+  const Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity() * 0.04;
+  const InputOutcome no_attitude = front.addDeadReckoning(9.5, Eigen::Vector3d(100.0, 200.0, -50.0), covariance);
+  EXPECT_FALSE(front.filter().initialized());
+  EXPECT_NE(no_attitude.problem.find("waits"), std::string::npos) << no_attitude.problem;
+  feedLevelSensors(&front, 10.0, 12.0, M_PI / 2.0);  // facing north
+  const InputOutcome no_mount = front.addDeadReckoning(10.0, Eigen::Vector3d(100.0, 200.0, -50.0), covariance);
+  EXPECT_FALSE(front.filter().initialized());
+  EXPECT_NE(no_mount.problem.find("camera"), std::string::npos) << no_mount.problem;
+  const InputOutcome fix = front.addFix(10.1, Eigen::Vector2d(100.0, 200.0), covariance, "", true);
+  EXPECT_FALSE(front.filter().initialized());  // a fix may not start it either
+  EXPECT_FALSE(fix.problem.empty());
+  *mounts = rigMounts();
+  const InputOutcome started = front.addDeadReckoning(10.5, Eigen::Vector3d(100.0, 200.0, -50.0), covariance);
+  EXPECT_EQ(started.started_from, "the dead reckoning");
+  EXPECT_NEAR(front.filter().current().position_en_m.y(), 200.5, 1e-9);  // at the camera, 0.5 m ahead
+  // A vehicle that never gives an attitude starts anyway, 2 s after its first navigation sample, and says so.
+  FusionFrontEnd blind = makeFrontEnd();
+  EXPECT_FALSE(blind.addDeadReckoning(20.0, Eigen::Vector3d(1, 2, 0), covariance).problem.empty());
+  EXPECT_FALSE(blind.filter().initialized());
+  const InputOutcome late = blind.addDeadReckoning(22.5, Eigen::Vector3d(1, 2, 0), covariance);
+  EXPECT_TRUE(blind.filter().initialized());
+  EXPECT_NE(late.problem.find("without the lever arm"), std::string::npos) << late.problem;
 }
 
 TEST(FusionFrontEnd, AFixIsMovedFromTheTransponderToTheCameraAndStartsTheFilterOnlyWhenAllowed) {

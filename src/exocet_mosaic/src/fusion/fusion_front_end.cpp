@@ -146,6 +146,7 @@ void FusionFrontEnd::reset() {
   altimeter_range_m_.clear();
   depth_m_.clear();
   image_only_en_m_.reset();
+  first_unplaced_stamp_s_.reset();
 }
 
 std::optional<Eigen::Quaterniond> FusionFrontEnd::attitudeAt(double stamp_s) const {
@@ -244,6 +245,12 @@ std::optional<ViewGeometry> FusionFrontEnd::viewAt(double stamp_s, const Eigen::
   return q ? viewWith(stamp_s, *q, base_from_camera) : std::nullopt;
 }
 
+std::string FusionFrontEnd::waitingForLeverArm(bool mounts_known) const {
+  return mounts_known ? "the filter waits for the attitude to place the camera from the navigation"
+                      : "the filter waits for the transform " + config_.base_frame + " -> " + cameraFrame() +
+                            " (and the transponder's, for a fix) to place the camera from the navigation";
+}
+
 InputOutcome FusionFrontEnd::addDeadReckoning(double stamp_s, const Eigen::Vector3d& base_en_m,
                                               const Eigen::Matrix2d& covariance_m2) {
   InputOutcome outcome;
@@ -254,6 +261,16 @@ InputOutcome FusionFrontEnd::addDeadReckoning(double stamp_s, const Eigen::Vecto
   if (attitude && camera) camera_en = cameraPosition(base_en_m, *attitude, *camera).head<2>();
   outcome.camera_en_m = camera_en;
   if (!filter_.initialized() && !startFromOperator(stamp_s, &outcome)) {
+    // The filter tracks the camera: started at base_link's position (its mount or the attitude not known yet: a
+    // late /tf_static, the IMU's first sample still to come) it would carry the lever arm as an error for as long as
+    // the fixes take to remove it.
+    // A vehicle without attitude sensing at all: started without the lever arm after kAttitudeWait.
+    if (!first_unplaced_stamp_s_) first_unplaced_stamp_s_ = stamp_s;
+    if (!camera || (!attitude && stamp_s - *first_unplaced_stamp_s_ < kAttitudeWaitS)) {
+      outcome.problem = waitingForLeverArm(camera.has_value());
+      return outcome;
+    }
+    if (!attitude) outcome.problem = "no attitude: the filter started at base_link's position, without the lever arm";
     start(stamp_s, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the dead reckoning", &outcome);
     return outcome;
   }
@@ -276,7 +293,10 @@ InputOutcome FusionFrontEnd::addFix(double stamp_s, const Eigen::Vector2d& fix_e
     camera_en += (attitude->toRotationMatrix() * (camera->translation() - transponder->translation())).head<2>();
   outcome.camera_en_m = camera_en;
   if (!filter_.initialized() && !startFromOperator(stamp_s, &outcome)) {
-    if (may_start) start(stamp_s, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the first fix", &outcome);
+    if (may_start && (!camera || !transponder || !attitude))
+      outcome.problem = waitingForLeverArm(camera.has_value() && transponder.has_value());
+    else if (may_start)
+      start(stamp_s, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the first fix", &outcome);
     return outcome;  // otherwise the dead reckoning starts the filter
   }
   outcome.update = filter_.addAbsoluteFix(stamp_s, camera_en, covariance_m2);

@@ -159,6 +159,10 @@ class FusionFrontEnd {
   void reset();
 
  private:
+  static constexpr double kAttitudeWaitS = 2.0;  // how long a first navigation sample waits for the attitude
+  std::optional<double> first_unplaced_stamp_s_;  // the first one that could not be placed at the camera
+  // Why the filter does not start from a navigation sample yet (the camera's place on the vehicle or the attitude).
+  std::string waitingForLeverArm(bool mounts_known) const;
   /// Starts the filter from the operator's point when one is pending; true if the filter runs after the call.
   bool startFromOperator(double stamp_s, InputOutcome* outcome);
   void start(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m, const std::string& source,
