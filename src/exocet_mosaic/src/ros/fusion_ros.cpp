@@ -879,6 +879,7 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
       const Eigen::Vector2d from = last_fused != key_frame_filter_en_m_.end() ? last_fused->second
                                                                              : last.initial.position_en_m;
       key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m - from, *yaw_rad);
+      ++graph_navigation_ties_;
     }
     graph_last_yaw_rad_ = yaw_rad;
     if (key_frame) key_frame_filter_en_m_[*key_frame] = state.position_en_m;
@@ -969,6 +970,14 @@ std::string trackCsv(const std::vector<fu::FilterState>& states) {
 
 void FusionRos::writeTracks() {
   release(true);
+  if (graph_ && feeder_) {
+    const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
+    int accepted = 0;
+    if (snapshot)
+      for (char a : snapshot->loop_accepted) accepted += a;
+    ROS_INFO("fusion: pose graph: %zu key frames (%lld tied by the navigation, no image odometry), %d loops accepted",
+             feeder_->keyFrames().size(), static_cast<long long>(graph_navigation_ties_), accepted);
+  }
   if (config_.track_csv.empty() && config_.smoothed_track_csv.empty()) return;
   if (!config_.keep_smoother_log) {
     ROS_ERROR("fusion: ~track_csv / ~smoothed_track_csv need ~keep_smoother_log: nothing written");
@@ -1022,6 +1031,7 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   if (graph_) {
     const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
     status.add("graph key frames", feeder_ ? feeder_->keyFrames().size() : 0);
+    status.add("graph key frames tied by the navigation (no image odometry)", graph_navigation_ties_);
     if (snapshot) {
       status.add("graph key frames solved", snapshot->key_frames.size());
       status.addf("graph last solve", "%.3f s CPU, %s", snapshot->report.cpu_s,

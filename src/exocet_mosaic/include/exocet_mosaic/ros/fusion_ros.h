@@ -149,6 +149,7 @@ class FusionRos {
   ros::Subscriber loop_image_sub_;
   std::map<double, sensor_msgs::CompressedImageConstPtr> recent_images_;
   uint64_t loop_images_missing_ = 0;
+  int64_t graph_navigation_ties_ = 0;  ///< key frames tied by the fused displacement (no image odometry)
   std::optional<Eigen::Matrix3d> last_camera_matrix_;  ///< K of the images (the motions' or camera_info's)
   void onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg);
   void offerKeyFrame(int64_t id, double stamp_s, const std::optional<Eigen::Quaterniond>& attitude, double yaw_rad);
