@@ -4,6 +4,8 @@ import time
 import unittest
 
 import rospy
+import tf2_ros
+from geometry_msgs.msg import TransformStamped
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from dynamic_reconfigure.client import Client
@@ -51,17 +53,29 @@ class OperatorKnobsTest(unittest.TestCase):
         rospy.Subscriber('/mosaic/ground_truth_path', Path, paths.append, queue_size=10)
         pub = rospy.Publisher('/ground_truth/odometry', Odometry, queue_size=100)
         self.assertTrue(self.wait_for(lambda: pub.get_num_connections() > 0))
+        # The path is drawn in map (rviz's single precision): the poses before utm -> map is known wait for it.
+        broadcaster = tf2_ros.StaticTransformBroadcaster()
         for k in range(20):
             pub.publish(odometry(100.0 + 0.2 * k, 500000.0 + 0.5 * k, 4700000.0 - 0.25 * k))
             if k == 7:
                 pub.publish(odometry(101.5, float('nan'), 4700000.0))
+            if k == 4:
+                t = TransformStamped()
+                t.header.stamp = rospy.Time.now()
+                t.header.frame_id = 'utm'
+                t.child_frame_id = 'map'
+                t.transform.translation.x = 500000.0
+                t.transform.translation.y = 4700000.0
+                t.transform.rotation.w = 1.0
+                broadcaster.sendTransform(t)
+                time.sleep(0.5)
             time.sleep(0.01)
         self.assertTrue(self.wait_for(lambda: paths and len(paths[-1].poses) == 20), 'path of 20 poses not published')
         path = paths[-1]
-        self.assertEqual(path.header.frame_id, 'utm')
+        self.assertEqual(path.header.frame_id, 'map')
         for k, pose in enumerate(path.poses):
-            self.assertAlmostEqual(pose.pose.position.x, 500000.0 + 0.5 * k, places=6)
-            self.assertAlmostEqual(pose.pose.position.y, 4700000.0 - 0.25 * k, places=6)
+            self.assertAlmostEqual(pose.pose.position.x, 0.5 * k, places=6)
+            self.assertAlmostEqual(pose.pose.position.y, -0.25 * k, places=6)
         self.assertTrue(self.wait_for(lambda: (self.status_of('odometry_path') or self.status_of('path')) is not None
                                       and (self.status_of('path') or {}).get('odometry rejected') == '1'),
                         'the NaN pose is not reported on /diagnostics: %s' % self.statuses.keys())

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <tf2_geometry_msgs/tf2_geometry_msgs.h>
+
 #include "exocet_common/ros/parameter_reader.h"
 
 namespace exocet_mosaic {
@@ -23,6 +25,7 @@ OdometryPathConfig readOdometryPathConfig(const ros::NodeHandle& private_nh) {
                     "poses closer than this to the last kept are skipped");
   params.readInt("max_poses", &c.max_poses, 10, 10000000, "poses kept; beyond, the path is thinned by two");
   params.readDouble("publish_rate_hz", &c.publish_rate_hz, 1e-3, 100.0, "how often the path is re-published");
+  params.readOptionalString("frame_id", &c.frame_id, "frame of the path, empty: the odometry's");
   return c;
 }
 
@@ -77,6 +80,36 @@ void OdometryPathRecorder::onOdometry(const nav_msgs::OdometryConstPtr& msg) {
   geometry_msgs::PoseStamped pose;
   pose.header = msg->header;
   pose.pose = msg->pose.pose;
+  if (!config_.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    geometry_msgs::TransformStamped t;
+    try {
+      // A fixed offset (utm -> map): the latest transform, whatever the pose's stamp.
+      t = tf_buffer_.lookupTransform(config_.frame_id, msg->header.frame_id, ros::Time(0));
+    } catch (const tf2::TransformException& e) {
+      // Kept until the transform comes (the fusion gives utm -> map once it knows the datum), within a bound.
+      if (waiting_.size() >= kMaxWaitingPoses) {
+        waiting_.pop_front();
+        ++untransformed_;
+      }
+      waiting_.push_back(pose);
+      ROS_WARN_THROTTLE(10.0, "odometry path: no transform %s -> %s yet (%s): poses wait", msg->header.frame_id.c_str(),
+                        config_.frame_id.c_str(), e.what());
+      return;
+    }
+    waiting_.push_back(pose);
+    while (!waiting_.empty()) {
+      geometry_msgs::PoseStamped moved;
+      tf2::doTransform(waiting_.front(), moved, t);
+      moved.header.stamp = waiting_.front().header.stamp;
+      moved.header.frame_id = config_.frame_id;
+      waiting_.pop_front();
+      if (waiting_.empty()) {
+        pose = moved;
+        break;
+      }
+      if (appendToPath(moved, config_, &path_) == PathUpdate::kRejectedNotFinite) ++rejected_;
+    }
+  }
   switch (appendToPath(pose, config_, &path_)) {
     case PathUpdate::kRejectedNotFinite:
       ++rejected_;
@@ -113,6 +146,7 @@ void OdometryPathRecorder::diagnose(diagnostic_updater::DiagnosticStatusWrapper&
   status.add("odometry received", received_);
   status.add("odometry rejected", rejected_);
   status.add("path restarts", restarts_);
+  status.add("poses left out for want of a transform to " + config_.frame_id, untransformed_);
   status.add("poses in the path", path_.poses.size());
 }
 
