@@ -193,6 +193,27 @@ TEST(TilesNotifier, HostNamesAndIpv6AreAccepted) {
   EXPECT_NE(v6.receive().find("\"index\":3"), std::string::npos);
 }
 
+TEST(TilesNotifier, TheSocketIsBoundToTheAddressItIsGiven) {
+  WrittenTile tile;
+  tile.ok = true;
+  tile.index = 4;
+  UdpReceiver v4(AF_INET);
+  ASSERT_TRUE(v4.ok());
+  TileNotifier bound("127.0.0.1", v4.port(), "127.0.0.1");
+  std::string error;
+  ASSERT_TRUE(bound.send(tile, &error)) << error;
+  EXPECT_NE(v4.receive().find("\"index\":4"), std::string::npos);
+  // Bound to loopback (the default of the node), it cannot reach another host: said at once, not at the first tile.
+  try {
+    TileNotifier unreachable("10.1.2.3", 5005, "127.0.0.1");
+    FAIL() << "a loopback socket towards another host was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("loopback"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(TileNotifier("127.0.0.1", 5005, "not-an-address"), std::runtime_error);
+  EXPECT_THROW(TileNotifier("127.0.0.1", 5005, "192.0.2.77"), std::runtime_error);  // not this machine's
+}
+
 TEST(TilesNotifier, BadHostOrPortGivesAClearError) {
   try {
     TileNotifier notifier("no.such.host.invalid", 5005);

@@ -87,6 +87,8 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readOptionalString("dive_name", &c.dive_name, "dive name written into the tiles' metadata");
   p.readOptionalString("udp_host", &c.udp_host, "host of the GIS to notify by UDP, empty: none");
   p.readInt("udp_port", &c.udp_port, 0, 65535, "UDP port of the GIS notification");
+  p.readOptionalString("udp_bind_address", &c.udp_bind_address,
+                       "local address of the UDP socket (loopback: this computer only), empty: the system's choice");
   if (!c.udp_host.empty() && c.udp_port == 0)
     throw std::invalid_argument("parameter ~udp_port must be in [1, 65535] when ~udp_host is set");
   p.readPositiveDouble("sync_timeout_s", &c.sync_timeout_s, 600.0,

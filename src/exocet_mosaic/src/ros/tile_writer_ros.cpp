@@ -64,7 +64,8 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   }
   const int stale = writer_->removeStaleTemporaries();
   if (stale > 0) ROS_WARN("tile writer: removed %d partial file(s) left by an interrupted run", stale);
-  if (!config_.udp_host.empty()) notifier_ = std::make_unique<tiles::TileNotifier>(config_.udp_host, config_.udp_port);
+  if (!config_.udp_host.empty())
+    notifier_ = std::make_unique<tiles::TileNotifier>(config_.udp_host, config_.udp_port, config_.udp_bind_address);
   if (config_.utm_zone > 0) {
     utm_zone_ = config_.utm_zone;
     northern_ = config_.northern_hemisphere;

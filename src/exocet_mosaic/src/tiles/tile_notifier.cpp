@@ -14,7 +14,21 @@
 namespace exocet_mosaic {
 namespace tiles {
 
-TileNotifier::TileNotifier(const std::string& host, int port) {
+namespace {
+
+bool isLoopback(const sockaddr* address) {
+  if (address->sa_family == AF_INET)
+    return (ntohl(reinterpret_cast<const sockaddr_in*>(address)->sin_addr.s_addr) >> 24) == 127;
+  if (address->sa_family == AF_INET6) {
+    const in6_addr& a = reinterpret_cast<const sockaddr_in6*>(address)->sin6_addr;
+    return IN6_IS_ADDR_LOOPBACK(&a) || (IN6_IS_ADDR_V4MAPPED(&a) && a.s6_addr[12] == 127);
+  }
+  return false;
+}
+
+}  // namespace
+
+TileNotifier::TileNotifier(const std::string& host, int port, const std::string& bind_address) {
   if (port < 1 || port > 65535) {
     throw std::invalid_argument("UDP notification port " + std::to_string(port) + " out of range [1, 65535]");
   }
@@ -36,6 +50,35 @@ TileNotifier::TileNotifier(const std::string& host, int port) {
     if (fd < 0) {
       last_error = std::strerror(errno);
       continue;
+    }
+    if (!bind_address.empty()) {
+      // The socket's own address: the station's interface towards the GIS (loopback: this computer only).
+      addrinfo local_hints{};
+      local_hints.ai_family = candidate->ai_family;
+      local_hints.ai_socktype = SOCK_DGRAM;
+      local_hints.ai_flags = AI_NUMERICHOST | AI_PASSIVE;
+      addrinfo* local = nullptr;
+      if (::getaddrinfo(bind_address.c_str(), "0", &local_hints, &local) != 0 || !local) {
+        ::close(fd);
+        last_error = "bind address '" + bind_address + "' is not a numeric address of this family";
+        continue;
+      }
+      const bool local_loopback = isLoopback(local->ai_addr);
+      const int bound = ::bind(fd, local->ai_addr, local->ai_addrlen);
+      const int bind_errno = errno;
+      ::freeaddrinfo(local);
+      if (bound != 0) {
+        ::close(fd);
+        last_error = "cannot bind to '" + bind_address + "': " + std::strerror(bind_errno);
+        continue;
+      }
+      if (local_loopback && !isLoopback(candidate->ai_addr)) {
+        ::close(fd);
+        ::freeaddrinfo(found);
+        throw std::invalid_argument("UDP notification socket bound to " + bind_address +
+                                    " (loopback) cannot reach '" + host +
+                                    "': bind it to this station's address on the GIS's network");
+      }
     }
     socket_ = fd;
     std::memcpy(&address_, candidate->ai_addr, candidate->ai_addrlen);

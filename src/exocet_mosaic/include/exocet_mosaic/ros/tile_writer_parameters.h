@@ -44,6 +44,8 @@ struct TileWriterNodeConfig {
   std::string dive_name;
   std::string udp_host;  ///< empty: no UDP notification
   int udp_port = 0;
+  /// Local address the UDP socket is bound to: loopback unless set to the station's address on the GIS's network.
+  std::string udp_bind_address = "127.0.0.1";
 
   // Synchronisation and life cycle.
   double sync_timeout_s = 10.0;  // the chain may lag behind the images by seconds on a replay

@@ -25,10 +25,13 @@ class TileNotifier {
   /**
    * @param host numeric IPv4 ("192.168.1.20") or IPv6 ("::1") address, or a host name (resolved once, here)
    * @param port UDP port, [1, 65535]
+   * @param bind_address numeric local address the socket is bound to (the station's interface towards the GIS;
+   *        "127.0.0.1": this computer only); empty: not bound (the system's choice)
    * @throws std::invalid_argument naming the host or port when the port is out of range or the host does not
-   *         resolve; std::runtime_error when no socket can be opened.
+   *         resolve, or when a loopback bind address cannot reach the host; std::runtime_error when no socket can be
+   *         opened and bound.
    */
-  TileNotifier(const std::string& host, int port);
+  TileNotifier(const std::string& host, int port, const std::string& bind_address = "");
   ~TileNotifier();
   TileNotifier(const TileNotifier&) = delete;
   TileNotifier& operator=(const TileNotifier&) = delete;
