@@ -16,10 +16,12 @@ WebMapNodeConfig readWebMapNodeConfig(const ros::NodeHandle& private_nh) {
   p.readString("site_dir", &s.site_dir, {}, "the folder of the web site (created; default <tiles_dir>/web)");
   p.readOptionalString("dive_name", &s.dive_name, "the dive's name, in the page's title and the MBTiles file");
   p.readString("leaflet_dir", &s.leaflet_dir, {}, "Leaflet's folder (Debian package libjs-leaflet)");
-  s.mbtiles_path = s.site_dir + "/mosaic.mbtiles";
-  p.readOptionalString("mbtiles_path", &s.mbtiles_path,
-                       "the MBTiles export of the web tiles written at shutdown (default <site_dir>/mosaic.mbtiles), "
+  s.gpkg_path = s.site_dir + "/mosaic.gpkg";
+  p.readOptionalString("gpkg_path", &s.gpkg_path,
+                       "the GeoPackage of the web tiles written at shutdown, for QGIS (default <site_dir>/mosaic.gpkg), "
                        "\"\" for none");
+  p.readOptionalString("mbtiles_path", &s.mbtiles_path,
+                       "an MBTiles file of the web tiles written at shutdown, \"\" (default) for none");
   p.readBool("load_existing", &s.load_existing, "cut the GeoTIFF tiles already in ~tiles_dir at start");
   p.readInt("max_zoom", &s.cutter.max_zoom, -1, 30,
             "the finest web tile level, -1: the native level of the first GeoTIFF tile (nearest its gsd)");

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <csignal>
@@ -155,6 +156,12 @@ void WebServer::start() {
   const int max_clients = config_.max_clients, nice = config_.thread_nice;
   auto counters = counters_;
   http_->new_task_queue = [max_clients, nice, counters] { return new ConnectionPool(max_clients, nice, counters); };
+  // SO_REUSEADDR (a restart binds again at once) but not cpp-httplib's default SO_REUSEPORT, with which a second
+  // node on the same port would share the connections silently instead of failing.
+  http_->set_socket_options([](socket_t sock) {
+    int yes = 1;
+    ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   http_->set_keep_alive_timeout(config_.keep_alive_s);
   http_->set_keep_alive_max_count(100);
   http_->set_read_timeout(5, 0);
@@ -211,6 +218,10 @@ void WebServer::start() {
                              std::to_string(config_.port) + " (" + why + ")");
   }
   listener_ = std::thread([this] { http_->listen_after_bind(); });
+  // cpp-httplib's stop() does nothing before its loop runs: wait for it, so that stop() always ends the listener.
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!http_->is_running() && std::chrono::steady_clock::now() < give_up)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
 }
 
 void WebServer::stop() {

@@ -17,7 +17,7 @@
 #include "exocet_common/json_file.h"
 #include "exocet_common/utm_grid.h"
 #include "exocet_web/site/site_assets.h"
-#include "exocet_web/tiles/mbtiles.h"
+#include "exocet_web/tiles/tile_packages.h"
 
 namespace exocet_web {
 namespace site {
@@ -638,17 +638,22 @@ std::string WebMap::shutdown() {
   const uint64_t errors_before = stats().errors;
   writeStateFiles();
   std::string errors = stats().errors > errors_before ? stats().last_error : "";
-  if (!config_.mbtiles_path.empty() && !cutter_->tiles().empty()) {
-    tiles::MbtilesInfo info;
-    info.name = config_.dive_name.empty() ? "Exocet mosaic" : config_.dive_name;
-    info.description = "Seabed mosaic (Exocet web map), " + std::to_string(sources_.size()) + " GeoTIFF tiles";
-    const tiles::MbtilesResult result = tiles::exportMbtiles(config_.cutter.output_dir, config_.mbtiles_path, info);
+  if (cutter_->tiles().empty()) return errors;
+  tiles::TilePackageInfo info;
+  info.name = config_.dive_name.empty() ? "Exocet mosaic" : config_.dive_name;
+  info.description = "Seabed mosaic (Exocet web map), " + std::to_string(sources_.size()) + " GeoTIFF tiles";
+  for (const auto& [path, format] : {std::make_pair(config_.gpkg_path, std::string("GeoPackage")),
+                                     std::make_pair(config_.mbtiles_path, std::string("MBTiles"))}) {
+    if (path.empty()) continue;
+    const tiles::TilePackageResult result = format == "GeoPackage"
+                                                ? tiles::exportGeoPackage(config_.cutter.output_dir, path, info)
+                                                : tiles::exportMbtiles(config_.cutter.output_dir, path, info);
     if (!result.ok) {
-      noteError("files", "MBTiles export: " + result.error);
+      noteError("files", format + " export: " + result.error);
       errors += (errors.empty() ? "" : "; ") + result.error;
     } else {
       log(Severity::kInfo, "files",
-          "MBTiles " + config_.mbtiles_path + ": " + std::to_string(result.tiles) + " web tiles, levels " +
+          format + " " + path + ": " + std::to_string(result.tiles) + " web tiles, levels " +
               std::to_string(result.min_zoom) + " to " + std::to_string(result.max_zoom));
     }
   }

@@ -13,7 +13,7 @@
  *   window.EXOCET_STATE, for a page opened from disk (file://, where a page may not fetch JSON);
  * - tiles.json (the GeoTIFF tiles, with what a restart needs to know which are already cut), track.json (the track
  *   and USBL fixes);
- * - <name>.mbtiles at shutdown, when configured (tiles/mbtiles.h).
+ * - mosaic.gpkg (GeoPackage, for QGIS) and, if wanted, mosaic.mbtiles, at shutdown (tiles/tile_packages.h).
  * Every file is replaced atomically, rewritten at most every state_period_s while something changed, and at
  * shutdown.
  *
@@ -58,7 +58,8 @@ struct WebMapConfig {
   double vehicle_event_period_s = 0.2;  ///< track and vehicle events at most this often, [0, 60] s
   int worker_nice = 10;                ///< niceness added to the cutting thread, [0, 19]
   bool load_existing = true;           ///< queue the GeoTIFFs of tiles_dir at start
-  /// The MBTiles export written at shutdown(); "" for none.
+  /// The GeoPackage and MBTiles exports written at shutdown(); "" for none.
+  std::string gpkg_path;
   std::string mbtiles_path;
 
   std::string validate() const;
@@ -130,8 +131,8 @@ class WebMap {
   bool waitIdle(std::chrono::milliseconds timeout);
 
   /**
-   * @brief Cuts what is still queued, stops the worker, writes the state files and, if configured, the MBTiles
-   * file. Idempotent. @return "" or the errors met while writing the files
+   * @brief Cuts what is still queued, stops the worker, writes the state files and, if configured, the GeoPackage
+   * and MBTiles files. Idempotent. @return "" or the errors met while writing the files
    */
   std::string shutdown();
 
