@@ -128,6 +128,7 @@ void WebMap::start() {
     started_ = true;
     dirty_ = true;
   }
+  writeStateFiles();  // the page finds its state at once, even before the first cut
   if (!to_cut.empty())
     log(Severity::kInfo, "start", std::to_string(to_cut.size()) + " GeoTIFF tiles of " + config_.tiles_dir +
                                       " to cut into web tiles");
@@ -160,7 +161,7 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
     }
   }
   std::vector<tiles::SourceTile> adopted;
-  std::vector<std::string> changed;
+  std::vector<std::string> changed, readable;
   std::set<std::string> present;
   for (const std::string& path : paths) {
     tiles::SourceTile source;
@@ -170,6 +171,7 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
       continue;
     }
     present.insert(source.key);
+    readable.push_back(path);
     const auto it = previous.find(source.key);
     if (compatible && it != previous.end() && it->second.value("version", 0) == source.version &&
         it->second.value("file", "") == fs::path(source.path).filename().string() &&
@@ -189,7 +191,7 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
     fs::remove_all(config_.cutter.output_dir, ec);
     fs::create_directories(config_.cutter.output_dir, ec);
     cut_unix_s_.clear();
-    *to_cut = paths;
+    *to_cut = readable;  // the others were counted as errors above
     return;
   }
   cutter_->adopt(adopted, min_zoom, max_zoom);
@@ -199,6 +201,10 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
   for (const auto& t : cutter_->tiles())
     if (t.z == max_zoom_) finest_tiles_.insert({t.x, t.y});
   *to_cut = changed;
+  stats_.sources = static_cast<int>(sources_.size());
+  stats_.web_tiles = static_cast<int>(cutter_->tiles().size());
+  stats_.min_zoom = min_zoom_;
+  stats_.max_zoom = max_zoom_;
   if (!adopted.empty())
     log(Severity::kInfo, "start",
         std::to_string(adopted.size()) + " GeoTIFF tiles already cut by a previous run (" +
