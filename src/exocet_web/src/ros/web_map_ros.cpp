@@ -34,6 +34,7 @@ WebMapRos::WebMapRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   server_->start();
   ROS_INFO("web map: %s (site %s, GeoTIFF tiles of %s)", url().c_str(), config_.site.site_dir.c_str(),
            config_.site.tiles_dir.c_str());
+  private_nh_.setParam("url", url());  // the port chosen when ~port is 0
   if (config_.server.bind_address != "127.0.0.1" && config_.server.bind_address != "localhost" &&
       config_.server.bind_address != "::1")
     ROS_WARN("web map: listening on %s, not only this computer: anyone on that network can read the dive's map",
@@ -158,7 +159,14 @@ void WebMapRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
   imu_stamp_ = msg->header.stamp;
 }
 
-void WebMapRos::onTimer(const ros::WallTimerEvent&) { map_->flushVehicleEvents(); }
+void WebMapRos::onTimer(const ros::WallTimerEvent&) {
+  map_->flushVehicleEvents();
+  // Wall time: a replay's sim clock may run fast, stop or go back.
+  if ((ros::WallTime::now() - last_diagnostics_).toSec() >= 1.0) {
+    last_diagnostics_ = ros::WallTime::now();
+    updater_.force_update();
+  }
+}
 
 void WebMapRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   const site::WebMapStats s = map_->stats();

@@ -60,7 +60,8 @@ class WebMapRos {
   std::unique_ptr<server::WebServer> server_;
   diagnostic_updater::Updater updater_;
   ros::Subscriber tile_sub_, odometry_sub_, datum_sub_, usbl_sub_, imu_sub_;
-  ros::WallTimer timer_;
+  ros::WallTimer timer_;  ///< vehicle events held back, diagnostics every second
+  ros::WallTime last_diagnostics_;
 
   std::optional<exocet_common::UtmGrid> grid_;
   std::string datum_frame_;
