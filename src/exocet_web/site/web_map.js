@@ -12,7 +12,7 @@
   const stats = {
     tileLoads: 0, tileErrors: 0, failedTiles: [], events: 0, resets: 0, webTileEvents: 0, tileEvents: 0,
     trackPoints: 0, usblFixes: 0, footprints: 0, connected: false, lastEventId: null, loadedRevs: {},
-    pageLoadedAt: Date.now(),
+    pageLoadedAt: Date.now(), lastTile: null, cutEventIds: {},
   };
 
   const map = L.map('map', { zoomControl: true, maxZoom: 28, worldCopyJump: false });
@@ -317,6 +317,7 @@
 
   function onTile(t) {
     stats.tileEvents += 1;
+    stats.lastTile = t.key;
     setTile(t);
     if (!fitted) {
       map.fitBounds([[t.bounds[0], t.bounds[1]], [t.bounds[2], t.bounds[3]]]);
@@ -325,6 +326,7 @@
   }
   function onWebTiles(d, id) {
     stats.webTileEvents += 1;
+    stats.cutEventIds[d.key] = id;
     const zoomChanged = d.zoom.min !== zoom.min || d.zoom.max !== zoom.max;
     if (zoomChanged) setZoomRange(d.zoom);
     const changed = new Set();
@@ -389,8 +391,10 @@
       });
   }
 
+  // For tests and the browser's console.
   window.EXOCET = { map: map, mosaic: mosaic, stats: stats, tileExists: tileExists, setFollow: setFollow,
-                    following: () => follow, zoom: () => zoom };
+                    following: () => follow, zoom: () => zoom,
+                    footprintBounds: key => footprintByKey.has(key) ? footprintByKey.get(key).getBounds() : null };
   if (LIVE) {
     if (window.EXOCET_STATE) applyState(window.EXOCET_STATE);  // at once, then the live state
     loadState(true);
