@@ -19,7 +19,7 @@ namespace exocet_web {
 namespace testing {
 
 struct SyntheticTile {
-  double origin_easting_m = 0.0;   ///< top-left corner
+  double origin_easting_m = 0.0;  ///< top-left corner
   double origin_northing_m = 0.0;
   double gsd_m = 0.005;
   int width_px = 400;
@@ -70,8 +70,8 @@ inline bool writeSyntheticGeoTiff(const std::string& path, const SyntheticTile& 
       out[2] = p[0];
       out[3] = p[3];
     }
-  const bool ok = GDALDatasetRasterIO(ds, GF_Write, 0, 0, t.width_px, t.height_px, rgba.data(), t.width_px,
-                                      t.height_px, GDT_Byte, 4, nullptr, 4, t.width_px * 4, 1) == CE_None;
+  const bool ok = GDALDatasetRasterIO(ds, GF_Write, 0, 0, t.width_px, t.height_px, rgba.data(), t.width_px, t.height_px,
+                                      GDT_Byte, 4, nullptr, 4, t.width_px * 4, 1) == CE_None;
   GDALClose(ds);
   return ok;
 }

@@ -1,15 +1,15 @@
 // The page's geodesy (site/geo.js: the UTM read-out under the cursor, the distance measure) run in a headless
 // Chromium and checked against GeographicLib (exocet_common::UtmGrid, GeographicLib::Geodesic).
 #include <cstdio>
-#include <iomanip>
 #include <fstream>
+#include <iomanip>
 #include <memory>
 #include <regex>
 #include <sstream>
 #include <vector>
 
-#include <GeographicLib/Geodesic.hpp>
 #include <gtest/gtest.h>
+#include <GeographicLib/Geodesic.hpp>
 #include <nlohmann/json.hpp>
 
 #include "exocet_common/testing/temp_dir.h"
@@ -51,8 +51,8 @@ TEST(GeoJs, UtmAgreesWithGeographicLib) {
       const double lon = 3.0 + offset_deg;  // zone 31's central meridian is 3 E
       points.push_back({lat, lon, zone, lat >= 0});
     }
-  points.push_back({43.0712, 5.879, 31, true});       // the sample dive
-  points.push_back({43.0712, 7.0, 31, true});         // 1 deg past the zone's eastern border, extended
+  points.push_back({43.0712, 5.879, 31, true});  // the sample dive
+  points.push_back({43.0712, 7.0, 31, true});    // 1 deg past the zone's eastern border, extended
   points.push_back({-45.0, -170.5, 2, false});
   points.push_back({10.0, 179.9, 60, true});
   std::ostringstream list;

@@ -23,12 +23,29 @@ TEST(RequestPath, PlainPathsAndTheIndex) {
 }
 
 TEST(RequestPath, TraversalAndMalformedTargetsAreRefused) {
-  for (const char* target :
-       {"/../etc/passwd", "/tiles/../../etc/passwd", "/tiles/..", "/./index.html", "/%2e%2e/etc/passwd",
-        "/%2E%2E/etc/passwd", "/tiles/%2e%2e%2f%2e%2e%2fetc/passwd", "/.%2e/etc/passwd", "/%2e./etc/passwd",
-        "/tiles%2f..%2f..%2fetc%2fpasswd", "/tiles%2F21", "/..%5c..%5cetc", "/a\\b", "//etc/passwd",
-        "/tiles//21/1/1.png", "etc/passwd", "", "http://example.com/index.html", "/%", "/%2", "/%zz", "/a%00.png",
-        "/a%0a.png"}) {
+  for (const char* target : {"/../etc/passwd",
+                             "/tiles/../../etc/passwd",
+                             "/tiles/..",
+                             "/./index.html",
+                             "/%2e%2e/etc/passwd",
+                             "/%2E%2E/etc/passwd",
+                             "/tiles/%2e%2e%2f%2e%2e%2fetc/passwd",
+                             "/.%2e/etc/passwd",
+                             "/%2e./etc/passwd",
+                             "/tiles%2f..%2f..%2fetc%2fpasswd",
+                             "/tiles%2F21",
+                             "/..%5c..%5cetc",
+                             "/a\\b",
+                             "//etc/passwd",
+                             "/tiles//21/1/1.png",
+                             "etc/passwd",
+                             "",
+                             "http://example.com/index.html",
+                             "/%",
+                             "/%2",
+                             "/%zz",
+                             "/a%00.png",
+                             "/a%0a.png"}) {
     const es::RequestPath p = es::parseRequestTarget(target);
     EXPECT_EQ(p.status, 400) << "'" << target << "' was accepted as '" << p.relative << "'";
     EXPECT_FALSE(p.reason.empty()) << target;
@@ -63,7 +80,7 @@ TEST(RequestPath, SymbolicLinksMayNotLeadOut) {
   EXPECT_EQ(es::resolveInside(root, "root/etc/hostname").status, 403);
   EXPECT_EQ(es::resolveInside(root, "sibling.txt").status, 403);
   EXPECT_EQ(es::resolveInside(root, "missing.png").status, 404);
-  EXPECT_EQ(es::resolveInside(root, "tiles").status, 404);  // a folder is not a file
+  EXPECT_EQ(es::resolveInside(root, "tiles").status, 404);          // a folder is not a file
   EXPECT_NE(es::resolveInside(root, "/etc/hostname").status, 200);  // absolute
   // A folder whose name starts like the root's is not inside it ("<root>-other").
   std::filesystem::create_directories(dir.file("site-other"));

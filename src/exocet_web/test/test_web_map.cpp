@@ -95,9 +95,8 @@ TEST(WebMap, BuildsTheSiteAnnouncesTilesAndRestartsWithoutCuttingAgain) {
     ASSERT_EQ(events["tile"].size(), 2u);
     EXPECT_EQ(events["tile"][1]["key"], "tile_0001");
     for (const auto& t : events["webtiles"][1]["written"]) {
-      const std::string path =
-          dir.file("site/tiles/") + std::to_string(int(t[0])) + "/" + std::to_string(int(t[1])) + "/" +
-          std::to_string(int(t[2])) + ".png";
+      const std::string path = dir.file("site/tiles/") + std::to_string(int(t[0])) + "/" + std::to_string(int(t[1])) +
+                               "/" + std::to_string(int(t[2])) + ".png";
       EXPECT_TRUE(std::filesystem::exists(path)) << path;
     }
     size_t points = 0;

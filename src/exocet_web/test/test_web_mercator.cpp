@@ -75,7 +75,7 @@ TEST(WebMercator, NativeZoomIsTheLevelNearestTheGsd) {
   for (int z = 5; z <= 28; ++z) {
     const double pixel_m = et::groundResolution_m_per_px(z, lat);
     EXPECT_EQ(et::nativeZoom(pixel_m, lat), z);
-    EXPECT_EQ(et::nativeZoom(pixel_m * 1.4, lat), z);   // within sqrt(2): still z
+    EXPECT_EQ(et::nativeZoom(pixel_m * 1.4, lat), z);  // within sqrt(2): still z
     EXPECT_EQ(et::nativeZoom(pixel_m * 1.42, lat), z - 1);
     EXPECT_EQ(et::nativeZoom(pixel_m / 1.42, lat), z + 1);
   }

@@ -89,8 +89,7 @@ struct Reply {
 };
 
 /// One request on its own connection ("Connection: close"), the reply parsed (no chunked bodies).
-Reply request(int port, const std::string& method, const std::string& target,
-              const std::string& extra_headers = "") {
+Reply request(int port, const std::string& method, const std::string& target, const std::string& extra_headers = "") {
   Connection c(port);
   EXPECT_TRUE(c.connected());
   c.send(method + " " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n" + extra_headers + "\r\n");
@@ -176,8 +175,8 @@ TEST(WebServer, ServesTheFolderReadOnly) {
 
   EXPECT_EQ(request(port, "GET", "/tiles/20/1/3.png").status, 404);
   EXPECT_EQ(request(port, "GET", "/tiles/21/1/2.png").status, 404);
-  for (const char* bad : {"/../secret.txt", "/%2e%2e/secret.txt", "/tiles/%2e%2e%2f%2e%2e%2fsecret.txt",
-                          "//etc/passwd", "/tiles%2f20", "/%zz"}) {
+  for (const char* bad : {"/../secret.txt", "/%2e%2e/secret.txt", "/tiles/%2e%2e%2f%2e%2e%2fsecret.txt", "//etc/passwd",
+                          "/tiles%2f20", "/%zz"}) {
     const int status = request(port, "GET", bad).status;
     EXPECT_TRUE(status == 400 || status == 404) << bad << ": " << status;
   }

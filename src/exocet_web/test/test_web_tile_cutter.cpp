@@ -11,8 +11,8 @@
 
 #include "exocet_common/testing/temp_dir.h"
 #include "exocet_common/utm_grid.h"
-#include "exocet_web/tiles/tile_packages.h"
 #include "exocet_web/tiles/source_tile.h"
+#include "exocet_web/tiles/tile_packages.h"
 #include "exocet_web/tiles/web_tile_cutter.h"
 #include "synthetic_geotiff.h"
 
@@ -135,8 +135,8 @@ TEST(WebTileCutter, AMarkedPixelLandsWhereTheProjectionPutsIt) {
 
 TEST(WebTileCutter, ANewTileRecutsOnlyTheWebTilesItTouches) {
   TempDir dir;
-  SyntheticTile a = tileAt(0.0, 0.0, 0.005, 400, 300);     // 2 x 1.5 m
-  SyntheticTile b = tileAt(6.0, -1.0, 0.005, 400, 300);    // 4 m east of a's east edge
+  SyntheticTile a = tileAt(0.0, 0.0, 0.005, 400, 300);   // 2 x 1.5 m
+  SyntheticTile b = tileAt(6.0, -1.0, 0.005, 400, 300);  // 4 m east of a's east edge
   b.pixel = [](int, int) { return cv::Vec4b(200, 60, 20, 255); };
   ASSERT_TRUE(writeSyntheticGeoTiff(dir.file("tile_0000.tif"), a));
   ASSERT_TRUE(writeSyntheticGeoTiff(dir.file("tile_0001.tif"), b));
@@ -230,7 +230,9 @@ TEST(WebTileCutter, TheNewestTileIsOnTopAndNoDataShowsWhatIsUnder) {
 TEST(WebTileCutter, AParentIsTheAlphaWeightedMeanOfItsChildren) {
   TempDir dir;
   SyntheticTile t = tileAt(0.0, 0.0, 0.005, 600, 400);
-  t.pixel = [](int c, int r) { return cv::Vec4b((c * 7) % 256, (r * 5) % 256, ((c + r) * 3) % 256, c < 100 ? 0 : 255); };
+  t.pixel = [](int c, int r) {
+    return cv::Vec4b((c * 7) % 256, (r * 5) % 256, ((c + r) * 3) % 256, c < 100 ? 0 : 255);
+  };
   ASSERT_TRUE(writeSyntheticGeoTiff(dir.file("tile_0000.tif"), t));
   et::WebTileCutter cutter(configFor(dir, 24, 19));
   ASSERT_TRUE(cutter.update(source(dir.file("tile_0000.tif"))).ok);
@@ -244,9 +246,11 @@ TEST(WebTileCutter, AParentIsTheAlphaWeightedMeanOfItsChildren) {
     EXPECT_TRUE(any_child) << p.path();
   }
   EXPECT_GT(parents, 0);
-  for (const et::TileId& c : cutter.tiles()) EXPECT_TRUE(c.z == 19 || cutter.tiles().count(et::parentOf(c))) << c.path();
+  for (const et::TileId& c : cutter.tiles())
+    EXPECT_TRUE(c.z == 19 || cutter.tiles().count(et::parentOf(c))) << c.path();
   // One parent pixel against its four children's, where all four are opaque.
-  const et::TileId child = *std::find_if(cutter.tiles().begin(), cutter.tiles().end(), [](const et::TileId& t) { return t.z == 24; });
+  const et::TileId child =
+      *std::find_if(cutter.tiles().begin(), cutter.tiles().end(), [](const et::TileId& t) { return t.z == 24; });
   const et::TileId parent = et::parentOf(child);
   const cv::Mat pc = exocet_web::testing::readWebTile(cutter.tilePath(child));
   const cv::Mat pp = exocet_web::testing::readWebTile(cutter.tilePath(parent));

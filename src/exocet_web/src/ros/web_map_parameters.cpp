@@ -10,16 +10,18 @@ WebMapNodeConfig readWebMapNodeConfig(const ros::NodeHandle& private_nh) {
   WebMapNodeConfig c;
   const exocet_common::ParameterReader p(private_nh);
   site::WebMapConfig& s = c.site;
-  p.readRequiredString("tiles_dir", &s.tiles_dir,
-                       "the folder of the GeoTIFF tiles (the tile writer's ~output_dir): its tiles are loaded at start");
+  p.readRequiredString(
+      "tiles_dir", &s.tiles_dir,
+      "the folder of the GeoTIFF tiles (the tile writer's ~output_dir): its tiles are loaded at start");
   s.site_dir = s.tiles_dir + "/web";
   p.readString("site_dir", &s.site_dir, {}, "the folder of the web site (created; default <tiles_dir>/web)");
   p.readOptionalString("dive_name", &s.dive_name, "the dive's name, in the page's title and the MBTiles file");
   p.readString("leaflet_dir", &s.leaflet_dir, {}, "Leaflet's folder (Debian package libjs-leaflet)");
   s.gpkg_path = s.site_dir + "/mosaic.gpkg";
-  p.readOptionalString("gpkg_path", &s.gpkg_path,
-                       "the GeoPackage of the web tiles written at shutdown, for QGIS (default <site_dir>/mosaic.gpkg), "
-                       "\"\" for none");
+  p.readOptionalString(
+      "gpkg_path", &s.gpkg_path,
+      "the GeoPackage of the web tiles written at shutdown, for QGIS (default <site_dir>/mosaic.gpkg), "
+      "\"\" for none");
   p.readOptionalString("mbtiles_path", &s.mbtiles_path,
                        "an MBTiles file of the web tiles written at shutdown, \"\" (default) for none");
   p.readBool("load_existing", &s.load_existing, "cut the GeoTIFF tiles already in ~tiles_dir at start");

@@ -12,9 +12,9 @@ namespace {
 
 std::string makeEpoch() {
   // Wall clock in microseconds and the pid, base 36: distinct for every run of the node.
-  const auto us = std::chrono::duration_cast<std::chrono::microseconds>(
-                      std::chrono::system_clock::now().time_since_epoch())
-                      .count();
+  const auto us =
+      std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count();
   const auto base36 = [](uint64_t v) {
     std::string s;
     do {

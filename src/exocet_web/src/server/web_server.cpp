@@ -33,15 +33,21 @@ constexpr int kSpareThreads = 4;  // threads beyond max_clients, to answer 503 r
 constexpr size_t kInMemoryFileLimit_bytes = 4u << 20;  // larger files (an MBTiles export) are streamed
 
 std::string contentType(const std::string& path) {
-  static const std::vector<std::pair<std::string, std::string>> kTypes = {
-      {".png", "image/png"},          {".html", "text/html; charset=utf-8"},
-      {".js", "text/javascript; charset=utf-8"}, {".css", "text/css; charset=utf-8"},
-      {".json", "application/json"},  {".svg", "image/svg+xml"},
-      {".jpg", "image/jpeg"},         {".webp", "image/webp"},
-      {".txt", "text/plain; charset=utf-8"}, {".map", "application/json"},
-      {".mbtiles", "application/vnd.sqlite3"}, {".gpkg", "application/geopackage+sqlite3"}};
+  static const std::vector<std::pair<std::string, std::string>> kTypes = {{".png", "image/png"},
+                                                                          {".html", "text/html; charset=utf-8"},
+                                                                          {".js", "text/javascript; charset=utf-8"},
+                                                                          {".css", "text/css; charset=utf-8"},
+                                                                          {".json", "application/json"},
+                                                                          {".svg", "image/svg+xml"},
+                                                                          {".jpg", "image/jpeg"},
+                                                                          {".webp", "image/webp"},
+                                                                          {".txt", "text/plain; charset=utf-8"},
+                                                                          {".map", "application/json"},
+                                                                          {".mbtiles", "application/vnd.sqlite3"},
+                                                                          {".gpkg", "application/geopackage+sqlite3"}};
   for (const auto& [extension, type] : kTypes)
-    if (path.size() > extension.size() && path.compare(path.size() - extension.size(), extension.size(), extension) == 0)
+    if (path.size() > extension.size() &&
+        path.compare(path.size() - extension.size(), extension.size(), extension) == 0)
       return type;
   return "application/octet-stream";
 }
@@ -193,10 +199,14 @@ void WebServer::start() {
       }
     }
     const int s = res.status;
-    if (s == 200 || s == 304) ++counters_->ok;
-    else if (s == 404) ++counters_->not_found;
-    else if (s == 503) ++counters_->busy;
-    else ++counters_->refused;
+    if (s == 200 || s == 304)
+      ++counters_->ok;
+    else if (s == 404)
+      ++counters_->not_found;
+    else if (s == 503)
+      ++counters_->busy;
+    else
+      ++counters_->refused;
     if (access_log_) access_log_(req.method, req.target, s);
     return httplib::Server::HandlerResponse::Handled;
   });

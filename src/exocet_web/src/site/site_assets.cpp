@@ -44,15 +44,15 @@ std::string writeSiteAssets(const std::string& site_dir, const std::string& leaf
     }
   }
   const fs::path leaflet(leaflet_dir);
-  if (!fs::exists(leaflet / "leaflet.js"))
-    return "no Leaflet in '" + leaflet_dir + "' (Debian package libjs-leaflet)";
+  if (!fs::exists(leaflet / "leaflet.js")) return "no Leaflet in '" + leaflet_dir + "' (Debian package libjs-leaflet)";
   for (const char* name : {"leaflet.js", "leaflet.css"}) {
     const std::string error = copyFile(leaflet / name, fs::path(site_dir) / "leaflet" / name);
     if (!error.empty()) return error;
   }
   for (const auto& entry : fs::directory_iterator(leaflet / "images", ec)) {
     if (!entry.is_regular_file()) continue;
-    const std::string error = copyFile(entry.path(), fs::path(site_dir) / "leaflet" / "images" / entry.path().filename());
+    const std::string error =
+        copyFile(entry.path(), fs::path(site_dir) / "leaflet" / "images" / entry.path().filename());
     if (!error.empty()) return error;
   }
   return "";

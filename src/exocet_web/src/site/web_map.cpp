@@ -130,8 +130,8 @@ void WebMap::start() {
   }
   writeStateFiles();  // the page finds its state at once, even before the first cut
   if (!to_cut.empty())
-    log(Severity::kInfo, "start", std::to_string(to_cut.size()) + " GeoTIFF tiles of " + config_.tiles_dir +
-                                      " to cut into web tiles");
+    log(Severity::kInfo, "start",
+        std::to_string(to_cut.size()) + " GeoTIFF tiles of " + config_.tiles_dir + " to cut into web tiles");
   worker_ = std::thread([this] { run(); });
 }
 
@@ -155,8 +155,8 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
                    cut.value("resampling", "") == config_.cutter.resampling;
       for (const Json& t : (*manifest)["tiles"]) previous[t.at("key").get<std::string>()] = t;
     } catch (const std::exception& e) {
-      log(Severity::kWarning, "files", "tiles.json of a previous run unreadable (" + std::string(e.what()) +
-                                           "): every web tile is cut again");
+      log(Severity::kWarning, "files",
+          "tiles.json of a previous run unreadable (" + std::string(e.what()) + "): every web tile is cut again");
       compatible = false;
     }
   }
@@ -302,7 +302,8 @@ void WebMap::enqueueGeoTiff(const std::string& path) {
 void WebMap::run() {
   if (config_.worker_nice > 0)
     ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), config_.worker_nice);
-  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config_.state_period_s));
+  const auto period =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config_.state_period_s));
   auto last_write = Clock::now() - period;
   std::unique_lock<std::mutex> lock(mutex_);
   while (true) {
@@ -415,9 +416,9 @@ void WebMap::process(const Job& job) {
   log(Severity::kDebug, "cut",
       source.key + " v" + std::to_string(source.version) + ": " + std::to_string(report.written.size()) +
           " web tiles written, " + std::to_string(report.removed.size()) + " removed in " +
-          std::to_string(std::lround(report.total_ms)) + " ms (GDAL warp " + std::to_string(std::lround(report.warp_ms)) +
-          " ms, " + std::to_string(report.sources_warped) + " warps), " + std::to_string(std::lround(latency_ms)) +
-          " ms after it was queued");
+          std::to_string(std::lround(report.total_ms)) + " ms (GDAL warp " +
+          std::to_string(std::lround(report.warp_ms)) + " ms, " + std::to_string(report.sources_warped) + " warps), " +
+          std::to_string(std::lround(latency_ms)) + " ms after it was queued");
   stats_.last_latency_ms = latency_ms;
   stats_.max_latency_ms = std::isnan(stats_.max_latency_ms) ? latency_ms : std::max(stats_.max_latency_ms, latency_ms);
   (void)start;
@@ -468,8 +469,7 @@ void WebMap::addVehiclePose(double stamp_s, double latitude_deg, double longitud
   vehicle_ = Vehicle{stamp_s, latitude_deg, longitude_deg, heading_deg};
   vehicle_unsent_ = true;
   dirty_ = true;
-  if (started_ && Clock::now() - last_vehicle_event_ >=
-                      std::chrono::duration<double>(config_.vehicle_event_period_s))
+  if (started_ && Clock::now() - last_vehicle_event_ >= std::chrono::duration<double>(config_.vehicle_event_period_s))
     publishVehicleLocked();
 }
 
@@ -517,7 +517,8 @@ void WebMap::addUsblFix(double stamp_s, double latitude_deg, double longitude_de
   dirty_ = true;
   if (!started_) return;
   Json j;
-  j["fixes"] = Json::array({Json::array({degrees(latitude_deg), degrees(longitude_deg), stamp_s, finiteOrNull(sigma_m)})});
+  j["fixes"] =
+      Json::array({Json::array({degrees(latitude_deg), degrees(longitude_deg), stamp_s, finiteOrNull(sigma_m)})});
   events_.publish("usbl", jsonLine(j));
 }
 
@@ -550,9 +551,10 @@ std::string WebMap::snapshotJson() const {
     box = {std::min(box.west_deg, s.latlon_box.west_deg), std::min(box.south_deg, s.latlon_box.south_deg),
            std::max(box.east_deg, s.latlon_box.east_deg), std::max(box.north_deg, s.latlon_box.north_deg)};
   }
-  j["bounds"] = sources_.empty() ? Json(nullptr)
-                                 : Json({degrees(box.south_deg), degrees(box.west_deg), degrees(box.north_deg),
-                                         degrees(box.east_deg)});
+  j["bounds"] =
+      sources_.empty()
+          ? Json(nullptr)
+          : Json({degrees(box.south_deg), degrees(box.west_deg), degrees(box.north_deg), degrees(box.east_deg)});
   j["tiles"] = tiles;
   Json xy = Json::array();
   for (const auto& [x, y] : finest_tiles_) xy.push_back({x, y});
@@ -614,7 +616,8 @@ void WebMap::writeStateFiles() {
     exocet_common::writeFileAtomically(config_.site_dir + "/state.json", state + "\n");
     exocet_common::writeFileAtomically(config_.site_dir + "/state.js",
                                        "// The web map's state for a page opened from disk (file://).\n"
-                                       "window.EXOCET_STATE = " + state + ";\n");
+                                       "window.EXOCET_STATE = " +
+                                           state + ";\n");
     exocet_common::writeFileAtomically(config_.site_dir + "/tiles.json", manifest + "\n");
     exocet_common::writeFileAtomically(config_.site_dir + "/track.json", track + "\n");
     std::lock_guard<std::mutex> lock(mutex_);

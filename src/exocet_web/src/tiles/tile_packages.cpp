@@ -118,7 +118,8 @@ class PackageFile {
   }
 
   /// Inserts every tile with `sql` (4 parameters: zoom, column, row, blob), rows from row(id).
-  bool insertTiles(const std::string& sql, const std::vector<TileFile>& files, const std::function<int64_t(const TileId&)>& row,
+  bool insertTiles(const std::string& sql, const std::vector<TileFile>& files,
+                   const std::function<int64_t(const TileId&)>& row,
                    const std::function<int64_t(const TileId&)>& column, int* count) {
     if (!ok()) return false;
     sqlite3_stmt* statement = nullptr;
@@ -222,9 +223,9 @@ TilePackageResult exportMbtiles(const std::string& tiles_dir, const std::string&
       "BEGIN;",
       "cannot create the tables");
   // MBTiles counts rows from the south (TMS).
-  db.insertTiles("INSERT INTO tiles VALUES (?, ?, ?, ?)", files,
-                 [](const TileId& t) { return (int64_t(1) << t.z) - 1 - t.y; }, [](const TileId& t) { return t.x; },
-                 &result.tiles);
+  db.insertTiles(
+      "INSERT INTO tiles VALUES (?, ?, ?, ?)", files, [](const TileId& t) { return (int64_t(1) << t.z) - 1 - t.y; },
+      [](const TileId& t) { return t.x; }, &result.tiles);
   result.min_zoom = files.front().id.z;
   result.max_zoom = files.back().id.z;
   const LatLonBox b = boundsOf(files, info.bounds);
@@ -234,16 +235,16 @@ TilePackageResult exportMbtiles(const std::string& tiles_dir, const std::string&
   std::snprintf(text, sizeof(text), "%.9f,%.9f,%d", 0.5 * (b.west_deg + b.east_deg), 0.5 * (b.south_deg + b.north_deg),
                 std::max(result.min_zoom, result.max_zoom - 2));
   const std::string center = text;
-  for (const auto& [name, value] : std::vector<std::pair<std::string, std::string>>{
-           {"name", info.name},
-           {"format", "png"},
-           {"type", "overlay"},
-           {"version", "1.3"},
-           {"description", info.description},
-           {"bounds", bounds},
-           {"center", center},
-           {"minzoom", std::to_string(result.min_zoom)},
-           {"maxzoom", std::to_string(result.max_zoom)}})
+  for (const auto& [name, value] :
+       std::vector<std::pair<std::string, std::string>>{{"name", info.name},
+                                                        {"format", "png"},
+                                                        {"type", "overlay"},
+                                                        {"version", "1.3"},
+                                                        {"description", info.description},
+                                                        {"bounds", bounds},
+                                                        {"center", center},
+                                                        {"minzoom", std::to_string(result.min_zoom)},
+                                                        {"maxzoom", std::to_string(result.max_zoom)}})
     db.exec("INSERT INTO metadata VALUES (" + quoted(name) + ", " + quoted(value) + ");", "cannot write the metadata");
   db.exec("COMMIT;", "cannot commit");
   if (!db.commit()) {
@@ -303,21 +304,25 @@ TilePackageResult exportGeoPackage(const std::string& tiles_dir, const std::stri
       "NULL, tile_row INTEGER NOT NULL, tile_data BLOB NOT NULL, UNIQUE (zoom_level, tile_column, tile_row));"
       "BEGIN;",
       "cannot create the GeoPackage tables");
-  db.exec("INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', NULL);"
-          "INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', NULL);"
-          "INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84 geodetic', 4326, 'EPSG', 4326, " +
-              quoted(wgs84_wkt) +
-              ", NULL);"
-              "INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84 / Pseudo-Mercator', 3857, 'EPSG', 3857, " +
-              quoted(mercator_wkt) + ", NULL);",
-          "cannot write the spatial reference systems");
+  db.exec(
+      "INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', NULL);"
+      "INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', NULL);"
+      "INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84 geodetic', 4326, 'EPSG', 4326, " +
+          quoted(wgs84_wkt) +
+          ", NULL);"
+          "INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84 / Pseudo-Mercator', 3857, 'EPSG', 3857, " +
+          quoted(mercator_wkt) + ", NULL);",
+      "cannot write the spatial reference systems");
   const std::string box = number(top_left.min_x_m) + ", " + number(bottom_right.min_y_m) + ", " +
                           number(bottom_right.max_x_m) + ", " + number(top_left.max_y_m);
-  db.exec("INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, max_x, max_y, "
-          "srs_id) VALUES ('mosaic', 'tiles', " + quoted(info.name) + ", " + quoted(info.description) + ", " + box +
-              ", 3857);"
-              "INSERT INTO gpkg_tile_matrix_set VALUES ('mosaic', 3857, " + box + ");",
-          "cannot write the contents");
+  db.exec(
+      "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, max_x, max_y, "
+      "srs_id) VALUES ('mosaic', 'tiles', " +
+          quoted(info.name) + ", " + quoted(info.description) + ", " + box +
+          ", 3857);"
+          "INSERT INTO gpkg_tile_matrix_set VALUES ('mosaic', 3857, " +
+          box + ");",
+      "cannot write the contents");
   for (int z = z0; z <= result.max_zoom; ++z) {
     const int64_t scale = int64_t(1) << (z - z0);
     const double res = resolution_m_per_px(z);

@@ -42,7 +42,8 @@ std::string number(double v) {
 /// tile lost in a crash is cut again at the next start).
 void writeFileReplacing(const std::string& path, const std::vector<uchar>& bytes) {
   const fs::path final_path(path);
-  const std::string temporary = (final_path.parent_path() / ("." + final_path.filename().string() + ".partial")).string();
+  const std::string temporary =
+      (final_path.parent_path() / ("." + final_path.filename().string() + ".partial")).string();
   const int fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw std::runtime_error("cannot create '" + temporary + "': " + std::strerror(errno));
   size_t done = 0;
@@ -99,10 +100,17 @@ cv::Mat readTile(const std::string& path) {
   if (image.empty() || image.depth() != CV_8U) return cv::Mat();
   cv::Mat bgra;
   switch (image.channels()) {
-    case 4: bgra = image; break;
-    case 3: cv::cvtColor(image, bgra, cv::COLOR_BGR2BGRA); break;
-    case 1: cv::cvtColor(image, bgra, cv::COLOR_GRAY2BGRA); break;
-    default: return cv::Mat();
+    case 4:
+      bgra = image;
+      break;
+    case 3:
+      cv::cvtColor(image, bgra, cv::COLOR_BGR2BGRA);
+      break;
+    case 1:
+      cv::cvtColor(image, bgra, cv::COLOR_GRAY2BGRA);
+      break;
+    default:
+      return cv::Mat();
   }
   return bgra;
 }
@@ -286,9 +294,9 @@ void WebTileCutter::cutFinestLevel(const TileRange& range, const std::string& on
         }
         const double x0 = block.min_x_m + c0 * res_m, x1 = block.min_x_m + c1 * res_m;
         const double y1 = block.max_y_m - r0 * res_m, y0 = block.max_y_m - r1 * res_m;
-        std::vector<std::string> args = {"-of", "MEM", "-t_srs", "EPSG:3857", "-te", number(x0), number(y0),
-                                         number(x1), number(y1), "-ts", std::to_string(c1 - c0),
-                                         std::to_string(r1 - r0), "-r", config_.resampling, "-dstalpha",
+        std::vector<std::string> args = {"-of", "MEM", "-t_srs", "EPSG:3857", "-te", number(x0), number(y0), number(x1),
+                                         number(y1), "-ts", std::to_string(c1 - c0), std::to_string(r1 - r0), "-r",
+                                         config_.resampling, "-dstalpha",
                                          // One chunk per warp: GDAL's default 64 MB splits a block and reads the
                                          // source again for each piece (twice as slow on a 2048-px block).
                                          "-wm", "512"};
@@ -311,15 +319,14 @@ void WebTileCutter::cutFinestLevel(const TileRange& range, const std::string& on
         if (bands == 2) band_map[0] = band_map[1] = band_map[2] = 1;
         if (bands != 2 && bands < 4) throw std::runtime_error("'" + source.path + "': unexpected band count");
         cv::Mat piece(r1 - r0, c1 - c0, CV_8UC4);
-        if (GDALDatasetRasterIO(warped.get(), GF_Read, 0, 0, piece.cols, piece.rows, piece.data, piece.cols,
-                                piece.rows, GDT_Byte, 4, band_map, 4, static_cast<int>(piece.step), 1) != CE_None)
+        if (GDALDatasetRasterIO(warped.get(), GF_Read, 0, 0, piece.cols, piece.rows, piece.data, piece.cols, piece.rows,
+                                GDT_Byte, 4, band_map, 4, static_cast<int>(piece.step), 1) != CE_None)
           throw std::runtime_error("cannot read the warped '" + source.path + "': " + errors.take());
         compositeOver(piece, canvas(cv::Rect(c0, r0, piece.cols, piece.rows)));
       }
       for (int ty = 0; ty < ny; ++ty)
         for (int tx = 0; tx < nx; ++tx) {
-          const cv::Mat tile =
-              canvas(cv::Rect(tx * kTileSize_px, ty * kTileSize_px, kTileSize_px, kTileSize_px));
+          const cv::Mat tile = canvas(cv::Rect(tx * kTileSize_px, ty * kTileSize_px, kTileSize_px, kTileSize_px));
           store({max_zoom_, bx + tx, by + ty}, tile.data, tile.step, report);
         }
     }

@@ -49,8 +49,7 @@ int main(int argc, char** argv) {
     std::cout << "web_map_site: " << stats.sources << " GeoTIFF tiles, " << stats.web_tiles << " web tiles (levels "
               << stats.min_zoom << " to " << stats.max_zoom << "), track of " << stats.track_points << " points in "
               << config.site_dir << "/index.html" << (config.gpkg_path.empty() ? "" : ", " + config.gpkg_path)
-              << (config.mbtiles_path.empty() ? "" : ", " + config.mbtiles_path)
-              << "\n";
+              << (config.mbtiles_path.empty() ? "" : ", " + config.mbtiles_path) << "\n";
     return errors.empty() && stats.errors == 0 ? 0 : 1;
   } catch (const std::invalid_argument& e) {
     std::cerr << "web_map_site: " << e.what() << "\n";

@@ -15,8 +15,8 @@
 namespace exocet_web {
 
 struct WebMapNodeConfig {
-  site::WebMapConfig site;        ///< tiles_dir required; site_dir default <tiles_dir>/web
-  server::ServerConfig server;    ///< bind_address default 127.0.0.1 (loopback), port 8080
+  site::WebMapConfig site;      ///< tiles_dir required; site_dir default <tiles_dir>/web
+  server::ServerConfig server;  ///< bind_address default 127.0.0.1 (loopback), port 8080
   // Inputs ("" turns the optional ones off).
   std::string tile_topic = "/mosaic/tile";          ///< exocet_msgs/Tile: the tile writer's (~tile_topic)
   std::string odometry_topic = "/mosaic/odometry";  ///< nav_msgs/Odometry: the fusion's (~odometry_out_topic)

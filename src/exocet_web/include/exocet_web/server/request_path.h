@@ -17,9 +17,9 @@ namespace server {
 
 /// The verdict on a request target.
 struct RequestPath {
-  int status = 200;       ///< 200 usable; 400 malformed or a traversal attempt; 404 a name never served
-  std::string relative;   ///< the decoded path below the served folder ("index.html" for "/"), when usable
-  std::string reason;     ///< why not, for the log
+  int status = 200;      ///< 200 usable; 400 malformed or a traversal attempt; 404 a name never served
+  std::string relative;  ///< the decoded path below the served folder ("index.html" for "/"), when usable
+  std::string reason;    ///< why not, for the log
 };
 
 /**
@@ -34,8 +34,8 @@ RequestPath parseRequestTarget(const std::string& target);
 
 /// A file found inside the served folder.
 struct ResolvedFile {
-  int status = 404;       ///< 200 found; 404 no such regular file; 403 a link or path leading out of the folder
-  std::string path;       ///< canonical absolute path, when found
+  int status = 404;  ///< 200 found; 404 no such regular file; 403 a link or path leading out of the folder
+  std::string path;  ///< canonical absolute path, when found
   std::string reason;
 };
 

@@ -51,11 +51,11 @@ struct ServerStats {
   int connections = 0;    ///< open now
   int event_streams = 0;  ///< SSE clients now
   uint64_t requests = 0;
-  uint64_t ok = 0;            ///< 200 and 304
-  uint64_t not_found = 0;     ///< 404
-  uint64_t refused = 0;       ///< 400, 403, 405
-  uint64_t busy = 0;          ///< 503 (beyond max_clients)
-  uint64_t bytes_sent = 0;    ///< file and snapshot bodies
+  uint64_t ok = 0;          ///< 200 and 304
+  uint64_t not_found = 0;   ///< 404
+  uint64_t refused = 0;     ///< 400, 403, 405
+  uint64_t busy = 0;        ///< 503 (beyond max_clients)
+  uint64_t bytes_sent = 0;  ///< file and snapshot bodies
 };
 
 class WebServer {

@@ -49,15 +49,15 @@ struct WebMapConfig {
   std::string tiles_dir;  ///< folder of the GeoTIFF tiles (loaded at start; may be empty: then none)
   std::string site_dir;   ///< the site folder, created when missing; required
   std::string leaflet_dir = "/usr/share/javascript/leaflet";
-  std::string dive_name;  ///< page title and MBTiles name
-  tiles::CutterConfig cutter;  ///< output_dir is set to site_dir/tiles
-  double state_period_s = 2.0;         ///< state files rewritten at most this often, [0.1, 3600] s
-  double track_min_spacing_m = 0.1;    ///< a track point closer than this to the last one kept is dropped, [0, 100] m
-  int max_track_points = 20000;        ///< beyond, every other point of the older half goes, [100, 10^7]
-  int max_usbl_fixes = 5000;           ///< the oldest go beyond, [10, 10^7]
+  std::string dive_name;                ///< page title and MBTiles name
+  tiles::CutterConfig cutter;           ///< output_dir is set to site_dir/tiles
+  double state_period_s = 2.0;          ///< state files rewritten at most this often, [0.1, 3600] s
+  double track_min_spacing_m = 0.1;     ///< a track point closer than this to the last one kept is dropped, [0, 100] m
+  int max_track_points = 20000;         ///< beyond, every other point of the older half goes, [100, 10^7]
+  int max_usbl_fixes = 5000;            ///< the oldest go beyond, [10, 10^7]
   double vehicle_event_period_s = 0.2;  ///< track and vehicle events at most this often, [0, 60] s
-  int worker_nice = 10;                ///< niceness added to the cutting thread, [0, 19]
-  bool load_existing = true;           ///< queue the GeoTIFFs of tiles_dir at start
+  int worker_nice = 10;                 ///< niceness added to the cutting thread, [0, 19]
+  bool load_existing = true;            ///< queue the GeoTIFFs of tiles_dir at start
   /// The GeoPackage and MBTiles exports written at shutdown(); "" for none.
   std::string gpkg_path;
   std::string mbtiles_path;
@@ -70,15 +70,15 @@ struct WebMapStats {
   uint64_t geotiffs_cut = 0;       ///< GeoTIFF updates processed successfully
   uint64_t web_tiles_written = 0;  ///< web tile files written (every level)
   uint64_t web_tiles_removed = 0;
-  uint64_t errors = 0;             ///< GeoTIFFs that could not be read or cut, files that could not be written
+  uint64_t errors = 0;  ///< GeoTIFFs that could not be read or cut, files that could not be written
   std::string last_error;
-  int queue_length = 0;            ///< GeoTIFFs waiting to be cut
-  int sources = 0;                 ///< GeoTIFF tiles on the map
-  int web_tiles = 0;               ///< web tiles on disk
+  int queue_length = 0;  ///< GeoTIFFs waiting to be cut
+  int sources = 0;       ///< GeoTIFF tiles on the map
+  int web_tiles = 0;     ///< web tiles on disk
   int min_zoom = -1, max_zoom = -1;
   double last_latency_ms = std::numeric_limits<double>::quiet_NaN();  ///< queued -> cut and announced
   double max_latency_ms = std::numeric_limits<double>::quiet_NaN();
-  double last_cut_ms = std::numeric_limits<double>::quiet_NaN();      ///< cutting alone
+  double last_cut_ms = std::numeric_limits<double>::quiet_NaN();          ///< cutting alone
   double cut_ms_per_web_tile = std::numeric_limits<double>::quiet_NaN();  ///< mean over every update
   size_t track_points = 0;
   size_t usbl_fixes = 0;
@@ -177,9 +177,9 @@ class WebMap {
   bool started_ = false;
   bool shut_down_ = false;
   bool dirty_ = true;
-  std::vector<tiles::SourceTile> sources_;       // the cutter's, copied after each update
-  std::map<std::string, double> cut_unix_s_;     // when each source was last cut
-  std::set<std::pair<int, int>> finest_tiles_;   // (x, y) of the web tiles at the max zoom
+  std::vector<tiles::SourceTile> sources_;      // the cutter's, copied after each update
+  std::map<std::string, double> cut_unix_s_;    // when each source was last cut
+  std::set<std::pair<int, int>> finest_tiles_;  // (x, y) of the web tiles at the max zoom
   int min_zoom_ = -1, max_zoom_ = -1;
   std::vector<TrackPoint> track_;
   std::vector<TrackPoint> unsent_track_;

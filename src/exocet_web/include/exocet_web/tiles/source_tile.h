@@ -27,9 +27,9 @@ struct SourceTile {
   int64_t mtime_ns = 0;  ///< modification time (ns since the epoch): with the size, tells a rewritten file
   int epsg = 0;          ///< EPSG code of the raster's CRS
   int width_px = 0, height_px = 0;
-  double gsd_m = 0.0;               ///< pixel side in the raster's CRS (metres)
-  MercatorBox bounds;               ///< EPSG:3857 box of the raster's outline
-  LatLonBox latlon_box;             ///< WGS 84 box of the outline
+  double gsd_m = 0.0;    ///< pixel side in the raster's CRS (metres)
+  MercatorBox bounds;    ///< EPSG:3857 box of the raster's outline
+  LatLonBox latlon_box;  ///< WGS 84 box of the outline
   /// The raster's four corners (top-left, top-right, bottom-right, bottom-left) as {latitude, longitude} degrees.
   std::array<std::array<double, 2>, 4> corners_deg{};
   double centre_latitude_deg = 0.0;

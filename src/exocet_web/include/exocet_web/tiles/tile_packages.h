@@ -31,9 +31,9 @@ struct TilePackageResult {
 };
 
 /**
- * @brief Writes every <z>/<x>/<y>.png of `tiles_dir` into the MBTiles `output_path` (tables metadata and tiles, a unique index
- * on the tile coordinates), under a temporary name first and renamed over any previous file: a reader never sees half
- * an export. Never throws.
+ * @brief Writes every <z>/<x>/<y>.png of `tiles_dir` into the MBTiles `output_path` (tables metadata and tiles, a
+ * unique index on the tile coordinates), under a temporary name first and renamed over any previous file: a reader
+ * never sees half an export. Never throws.
  */
 TilePackageResult exportMbtiles(const std::string& tiles_dir, const std::string& output_path,
                                 const TilePackageInfo& info);

@@ -46,15 +46,15 @@ struct CutterConfig {
 /// What one update did.
 struct CutReport {
   bool ok = false;
-  std::string error;             ///< what failed (GDAL's message, the file), when !ok
-  std::vector<TileId> written;   ///< web tiles (re)written, every level
-  std::vector<TileId> removed;   ///< web tiles deleted (no data left)
+  std::string error;            ///< what failed (GDAL's message, the file), when !ok
+  std::vector<TileId> written;  ///< web tiles (re)written, every level
+  std::vector<TileId> removed;  ///< web tiles deleted (no data left)
   /// Keys of other GeoTIFFs that could not be opened (e.g. a version replaced on disk before its message came):
   /// left out of the composite; the caller re-reads their folder.
   std::vector<std::string> unreadable;
-  int sources_warped = 0;        ///< GeoTIFF warps done (one per GeoTIFF and block of web tiles)
-  double warp_ms = 0.0;          ///< time in GDAL's warper
-  double total_ms = 0.0;         ///< wall time of the update
+  int sources_warped = 0;  ///< GeoTIFF warps done (one per GeoTIFF and block of web tiles)
+  double warp_ms = 0.0;    ///< time in GDAL's warper
+  double total_ms = 0.0;   ///< wall time of the update
 };
 
 /// Not thread-safe: one thread cuts. The web tiles may be read meanwhile (renamed into place).
