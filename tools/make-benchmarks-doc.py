@@ -518,6 +518,40 @@ BENCHMARKS = {
             ('run_time_s', 'benchmark wall time (s)'),
         ],
     },
+    'web_map.json': {
+        'title': 'Live web map (web_map_node)',
+        'command': 'devel/lib/exocet_web/bench_web_map --output-dir out/bench [--rate R] [--clients N]',
+        'measures': 'How fast a GeoTIFF tile written by the chain reaches the pages watching the live web map, what '
+                    'cutting it into web tiles costs, and whether browsers watching slow the chain down.',
+        'data': 'The sample out-and-back dive (`bags/sample_out_and_back.bag`: 435 PAL images, 87 s, four tiles of '
+                '150 images), replayed through `replay.launch web:=true`.',
+        'method': [
+            'Two replays on a private ROS master: without any client, then with N lightweight clients (Python '
+            'threads in the benchmark process, each holding the /events stream as a page does and fetching every '
+            'web tile announced).',
+            'Latency: from the tile writer\'s Tile message (sent once the GeoTIFF is renamed into place) to a client '
+            'having fetched every web tile of that tile\'s "webtiles" event (status 200); median and max over tiles '
+            'and clients. CPU per web tile: web_map_node\'s user + system time over the web tiles it cut (all levels), '
+            'in the run without clients. Chain frames per second: image pairs registered (/mosaic/motion) per wall '
+            'second between the first and the last.',
+        ],
+        'targets': ['A new tile on the pages within 2 s of being written; the chain\'s frames per second the same '
+                    'with 20 clients as with none (within the run-to-run noise).'],
+        'figures': [
+            ('tile_written_to_announced_ms.*', 'GeoTIFF written -> its announcement received by a client (ms)'),
+            ('tile_written_to_served_ms.*', 'GeoTIFF written -> all its web tiles fetched by a client (ms)'),
+            ('node_max_cut_latency_ms', 'web_map_node: tile message queued -> cut and announced, max (ms)'),
+            ('cpu_ms_per_web_tile', 'web_map_node CPU per web tile cut (ms)'),
+            ('wall_ms_per_web_tile', 'cutting wall time per web tile (ms)'),
+            ('chain_fps_*', 'image pairs registered per second'),
+            ('web_tiles_cut', 'web tiles cut (every level)'),
+            ('geotiff_tiles_cut', 'GeoTIFF tiles cut'),
+            ('client_requests', 'requests of the clients'),
+            ('client_errors', 'failed requests of the clients'),
+            ('rate', 'replay speed'),
+            ('clients', 'clients in the second replay'),
+        ],
+    },
     'servo.json': {
         'title': 'Intrinsics-free visual servoing, point level',
         'command': 'devel/lib/exocet_servo/bench_servo --output-dir out/bench',
