@@ -102,6 +102,11 @@ rosrun exocet_mosaic adjust_tiles --tiles "$out/tiles" --output "$out/tiles_adju
   --report "$out/tiles_adjusted/adjustment.json"
 rosrun exocet_mosaic tiles_overview --tiles "$out/tiles_adjusted" --track "$out/fused_track.csv" \
   --output "$out/tiles_adjusted_overview.png"
+echo "run-demo: the web map of the dive (a static site: open it from disk or serve the folder)"
+rosrun exocet_web web_map_site --tiles "$out/tiles" --site "$out/web" --track "$out/fused_track.csv" \
+  --dive-name "$(basename "$bag" .bag)" \
+  > "$out/web_map_site.log" 2>&1 || { echo "run-demo: web_map_site failed; $out/web_map_site.log:" >&2;
+                                     tail -n 20 "$out/web_map_site.log" >&2; exit 1; }
 for tile in "${tiles[@]}"; do
   [[ $tile == *.cog.tif ]] && continue
   gdalinfo "$tile" > "${tile%.tif}.gdalinfo.txt"
@@ -142,3 +147,5 @@ for key, label in (('fused', 'fused track:   '), ('smoothed', 'RTS smoothed:  ')
         print('  %s RMS error %s (camera centre)' % (label, m(s[key]['rms_horizontal_error_m'])))
 print('Look at %s' % s['plot'])
 EOF
+echo "Web map of the dive: $out/web/index.html (open it in a browser, or serve $out/web with any web server);"
+echo "  for QGIS: $out/web/mosaic.gpkg, or the tiles' virtual mosaic $out/tiles/tile_mosaic.vrt"

@@ -229,7 +229,9 @@ void WebMap::loadTrack() {
     }
   }
   // A finished dive: the fusion's track, in the tiles' UTM zone.
-  const std::string csv = config_.tiles_dir.empty() ? "" : config_.tiles_dir + "/fused_track.csv";
+  const std::string csv = !config_.track_csv.empty() ? config_.track_csv
+                          : config_.tiles_dir.empty() ? ""
+                                                      : config_.tiles_dir + "/fused_track.csv";
   std::ifstream in(csv);
   if (csv.empty() || !in) return;
   int epsg = 0;

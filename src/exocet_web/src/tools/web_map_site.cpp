@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   app.add_option("--block-tiles", config.cutter.block_tiles, "web tiles per side warped at once")
       ->check(CLI::Range(1, 64));
   app.add_option("--leaflet", config.leaflet_dir, "Leaflet's folder (Debian's libjs-leaflet)");
+  app.add_option("--track", config.track_csv, "the fusion's track (fused_track.csv; default <tiles>/fused_track.csv)")
+      ->check(CLI::ExistingFile);
   if (const auto status = exocet_common::parseCommandLine(app, argc, argv)) return *status;
   if (config.site_dir.empty()) config.site_dir = config.tiles_dir + "/web";
   config.gpkg_path = gpkg == "default" ? config.site_dir + "/mosaic.gpkg" : gpkg;

@@ -49,6 +49,9 @@ struct WebMapConfig {
   std::string tiles_dir;  ///< folder of the GeoTIFF tiles (loaded at start; may be empty: then none)
   std::string site_dir;   ///< the site folder, created when missing; required
   std::string leaflet_dir = "/usr/share/javascript/leaflet";
+  /// The fusion's track of a finished dive (stamp_s,easting_m,northing_m,... in the tiles' UTM zone), read when no
+  /// track.json exists; empty: tiles_dir/fused_track.csv.
+  std::string track_csv;
   std::string dive_name;                ///< page title and MBTiles name
   tiles::CutterConfig cutter;           ///< output_dir is set to site_dir/tiles
   double state_period_s = 2.0;          ///< state files rewritten at most this often, [0.1, 3600] s
