@@ -22,6 +22,7 @@ import unittest
 
 import numpy as np
 import rospy
+import tf2_ros
 import yaml
 import rostest
 from exocet_msgs.msg import GeoDatum, Tile as TileMsg
@@ -50,6 +51,8 @@ class TilesReplayTest(unittest.TestCase):
         rospy.Subscriber('/mosaic/odometry', Odometry, on_odometry, queue_size=1000)
         truth_paths = []
         rospy.Subscriber('/mosaic/ground_truth_path', Path, truth_paths.append, queue_size=10)
+        self.tf_buffer = tf2_ros.Buffer()
+        self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         udp.bind(('127.0.0.1', rospy.get_param('~udp_port')))
         udp.settimeout(0.05)
@@ -79,19 +82,29 @@ class TilesReplayTest(unittest.TestCase):
         rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
         reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()
         self.assertTrue(reply.success, reply.message)
-        deadline = time.time() + 5.0
-        while time.time() < deadline:
+        # Settled: the tiles drawn again with their images' gains (the last ones after the flush) announced too; no
+        # tile message for 5 s, at most 90 s.
+        last_count, last_change, start = len(tiles_msgs), time.time(), time.time()
+        while time.time() - last_change < 5.0 and time.time() - start < 90.0:
             try:
                 datagrams.append(json.loads(udp.recv(65536).decode('utf-8')))
             except socket.timeout:
                 pass
+            if len(tiles_msgs) != last_count:
+                last_count, last_change = len(tiles_msgs), time.time()
+        every_version = list(tiles_msgs)
+        newest = {}
+        for m in every_version:
+            if m.index not in newest or m.version > newest[m.index].version:
+                newest[m.index] = m
+        tiles_msgs = [newest[i] for i in sorted(newest)]
 
         self.assertGreaterEqual(len(tiles_msgs), 3, 'a 435-image dive at 120 images per mosaic gives several tiles')
         self.assertTrue(datums, 'the fusion publishes its UTM datum')
         epsg = datums[-1].epsg
         self.assertEqual(epsg, 32631, 'the sample dive lies in UTM zone 31 north')
-        self.assertEqual(len(datagrams), len(tiles_msgs), 'one UDP datagram per tile')
-        self.assertEqual(sorted(d['geotiff_path'] for d in datagrams), sorted(m.geotiff_path for m in tiles_msgs))
+        self.assertEqual(len(datagrams), len(every_version), 'one UDP datagram per tile and version')
+        self.assertEqual(sorted(d['geotiff_path'] for d in datagrams), sorted(m.geotiff_path for m in every_version))
         self.assertFalse(glob.glob(os.path.join(output_dir, '.*partial*')), 'no temporary file is left')
 
         tiles = []
@@ -201,11 +214,13 @@ class TilesReplayTest(unittest.TestCase):
         self.assertTrue(truth_paths, 'the ground-truth path is published')
         poses = truth_paths[-1].poses
         self.assertGreater(len(poses), 100)
-        self.assertEqual(truth_paths[-1].header.frame_id, 'utm')
+        # In map, the fusion's local frame (rviz draws in single precision): utm -> map is its fixed offset.
+        self.assertEqual(truth_paths[-1].header.frame_id, 'map')
+        origin = self.tf_buffer.lookup_transform('utm', 'map', rospy.Time(0), rospy.Duration(5.0)).transform.translation
         # The base_link track of the ground truth stays within a metre of the camera track (lever arm).
         cams = np.array([[float(r['cam_easting_m']), float(r['cam_northing_m'])] for r in truth])
         for pose in poses[::10]:
-            p = np.array([pose.pose.position.x, pose.pose.position.y])
+            p = np.array([pose.pose.position.x + origin.x, pose.pose.position.y + origin.y])
             self.assertLess(np.min(np.linalg.norm(cams - p, axis=1)), 1.0)
 
 
