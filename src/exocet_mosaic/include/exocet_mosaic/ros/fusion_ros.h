@@ -38,6 +38,7 @@
 
 #include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/fusion/fusion_front_end.h"
+#include "exocet_mosaic/fusion/saved_fusion_state.h"
 #include "exocet_mosaic/graph/background_pose_graph.h"
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/graph/loop_closer.h"
@@ -60,6 +61,11 @@ namespace exocet_mosaic {
  * (throttled) and shown on /diagnostics; a stamp going back further than ~clock_jump_s (a bag replayed again, a
  * clock jump) resets the filter and the tracks. At shutdown the filtered and RTS-smoothed tracks are written to
  * CSV when ~track_csv / ~smoothed_track_csv are set.
+ *
+ * The last published state is kept in ~state_file (at most every ~state_save_period_s): a fusion restarted mid-dive
+ * (a crash, a respawn) starts its filter from it, the gap predicted as one without image motion, when its first input
+ * comes within ~state_max_age_s after it (fusion::resumeRefusal); otherwise (a bag played again, another dive) it
+ * ignores it and says why.
  */
 class FusionRos {
  public:
@@ -110,6 +116,14 @@ class FusionRos {
   /// The filter has just started (from `source`): the map origin and a log line.
   void onStarted(const std::string& source);
   void initializeFromParameters();
+  /// Reads ~state_file (when set and present) for the first input to decide on.
+  void loadSavedState();
+  /// Before the first input reaches the filter: starts it from the saved state when that belongs to this dive.
+  void maybeResume(double first_stamp_s);
+  /// Writes the filter's state to ~state_file, at most every ~state_save_period_s unless `now`.
+  void saveState(bool now);
+  /// The map origin given (a resumed dive keeps its own), broadcast as ensureMapOrigin does.
+  void setMapOrigin(const Eigen::Vector2d& origin_en_m);
   /// Images only and no first point: the dive is mapped from (0, 0) in the local frame ~map_frame (said once).
   void startInLocalFrame();
 
@@ -202,6 +216,13 @@ class FusionRos {
   std::map<std::string, uint64_t> applied_, gated_, too_old_, invalid_, rejected_inputs_;
   std::string last_problem_;
   ros::WallTime last_nav_wall_, last_motion_wall_;
+
+  // Restart mid-dive.
+  std::optional<fusion::SavedFusionState> saved_state_;  ///< read at start, decided on at the first input
+  std::string started_from_;                              ///< what started the filter last
+  std::string resume_note_;                               ///< what became of the saved state
+  ros::SteadyTime last_state_save_;
+  uint64_t state_saves_ = 0, state_save_failures_ = 0;
 };
 
 }  // namespace exocet_mosaic
