@@ -245,21 +245,23 @@ void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv
   if (!run_decided_) decideRun(header.stamp.toSec());
   newest_image_stamp_s_ = std::max(newest_image_stamp_s_.load(), header.stamp.toSec());
   checkClock(stamp_ns);
-  addAndProcess([&](double now_s) {
-    return assembler_.addImage(stamp_ns, std::move(decode), now_s, image_size, image_channels);
-  });
+  if (!addAndProcess([&](double now_s) {
+        return assembler_.addImage(stamp_ns, std::move(decode), now_s, image_size, image_channels);
+      }))
+    reject("image stamped like one already received (a duplicated stamp) or older than the frames composed: ignored");
 }
 
-void TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
+bool TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
   // One part in, then every frame it completes (or that waited too long) out, in stamp order.
   std::vector<AssembledFrame> ready;
   {
     std::lock_guard<std::mutex> lock(compose_mutex_);
     const double now_s = last_input_wall_.toSec();
-    if (!add(now_s)) return;
+    if (!add(now_s)) return false;
     ready = assembler_.popReady(now_s);
   }
   processReady(std::move(ready));
+  return true;
 }
 
 void TileWriterRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
@@ -1239,6 +1241,7 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("navigation jumps", stats.navigation_jumps);
   status.add("frames waiting for motion/pose", pending);
   status.add("frames released incomplete (timeout)", assembler_.timedOut());
+  status.add("late or repeated parts ignored", assembler_.lateParts() + assembler_.duplicateImages());
   status.add("clock jumps", clock_jumps_);
   status.add("open mosaic images", stats.open_frames);
   status.add("open mosaic extent (m)", stats.open_extent_m);

@@ -96,8 +96,9 @@ class TileWriterRos {
   void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
                    int image_channels);
   void checkClock(std::int64_t stamp_ns);
-  /// Adds a part to the assembler under the lock (add returns false for a late part), then composes what is ready.
-  void addAndProcess(const std::function<bool(double now_s)>& add);
+  /// Adds a part to the assembler under the lock, then composes what is ready; false (nothing done) when `add`
+  /// refused the part (a late part, a repeated image).
+  bool addAndProcess(const std::function<bool(double now_s)>& add);
 
   void processReady(std::vector<AssembledFrame> frames);
   void compose(const AssembledFrame& frame);
