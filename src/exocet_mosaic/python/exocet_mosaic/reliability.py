@@ -23,25 +23,41 @@ def workspace_bench_dir(start_file):
     raise RuntimeError('no catkin workspace above %s: set EXOCET_BENCH_DIR' % start_file)
 
 
-def update_reliability(figures, bench_dir):
-    """Merges `figures` (a dict) into bench_dir/reliability.json; returns the whole file's content after the merge."""
-    os.makedirs(bench_dir, exist_ok=True)
-    path = os.path.join(bench_dir, 'reliability.json')
+def merge_json_file(path, update):
+    """Locked read-modify-write of the JSON object in `path`: `update` (a dict) is merged into it. A file that is not
+    a JSON object is replaced. Returns the object written."""
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
     with open(path + '.lock', 'w') as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         content = {}
-        if os.path.exists(path):
-            try:
-                with open(path) as f:
-                    content = json.load(f)
-            except ValueError:
-                content = {}  # a file that is not JSON is replaced rather than merged into
-            if not isinstance(content, dict):
-                content = {}
-        content.update(figures)
-        fd, temporary = tempfile.mkstemp(prefix='.reliability.', suffix='.partial', dir=bench_dir)
+        try:
+            with open(path) as f:
+                content = json.load(f)
+        except (OSError, ValueError):
+            pass
+        if not isinstance(content, dict):
+            content = {}
+        content.update(update)
+        fd, temporary = tempfile.mkstemp(prefix='.' + os.path.basename(path) + '.', suffix='.partial', dir=folder)
         with os.fdopen(fd, 'w') as f:
             json.dump(content, f, indent=2, sort_keys=True)
             f.write('\n')
         os.replace(temporary, path)
     return content
+
+
+def update_reliability(figures, bench_dir):
+    """Merges `figures` (a dict) into bench_dir/reliability.json; returns the whole file's content after the merge."""
+    return merge_json_file(os.path.join(bench_dir, 'reliability.json'), figures)
+
+
+def record_bad_recordings(results, bench_dir):
+    """Merges `results` ({recording name: survived (bool)}) into bench_dir/bad_recordings.json (the tests of bad
+    recordings each fill in theirs) and sets bad_recordings_tried / bad_recordings_survived in reliability.json from
+    every recording there. Returns (tried, survived)."""
+    content = merge_json_file(os.path.join(bench_dir, 'bad_recordings.json'),
+                              {name: bool(ok) for name, ok in results.items()})
+    tried, survived = len(content), sum(1 for ok in content.values() if ok is True)
+    update_reliability({'bad_recordings_tried': tried, 'bad_recordings_survived': survived}, bench_dir)
+    return tried, survived

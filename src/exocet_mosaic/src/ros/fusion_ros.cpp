@@ -167,6 +167,7 @@ void FusionRos::resetAll(const std::string& why) {
   front_end_->reset();
   if (graph_) startGraph();  // the graph of the dive so far ends with the clock it was built on
   have_stamp_ = false;
+  newest_sample_stamps_.clear();
   awaiting_motion_.clear();
   newest_motion_stamp_s_ = -1e300;
   for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->poses.clear();
@@ -177,7 +178,25 @@ void FusionRos::resetAll(const std::string& why) {
 void FusionRos::rejectInput(const std::string& kind, const std::string& why) {
   ++rejected_inputs_[kind];
   last_problem_ = kind + " rejected: " + why;
-  ROS_ERROR_THROTTLE(2.0, "fusion: %s rejected: %s", kind.c_str(), why.c_str());
+  // Throttled per kind of input: a bad attitude stream must not hide bad fixes.
+  std::uint64_t held_back = 0;
+  if (rejection_log_.allow(kind, &held_back))
+    ROS_ERROR("fusion: %s rejected: %s%s", kind.c_str(), why.c_str(), rejection_log_.heldBackNote(held_back).c_str());
+}
+
+bool FusionRos::inStreamOrder(const std::string& kind, const ros::Time& stamp) {
+  // Samples are interpolated between their neighbours: one stamped at or before the newest (sent twice, or going
+  // back) is left out rather than allowed to reorder the history.
+  const auto newest = newest_sample_stamps_.find(kind);
+  if (newest != newest_sample_stamps_.end() && stamp <= newest->second) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "stamped " << (newest->second - stamp).toSec()
+        << " s before or at the previous sample's (a duplicated or backward stamp): out of order";
+    rejectInput(kind, why.str());
+    return false;
+  }
+  newest_sample_stamps_[kind] = stamp;
+  return true;
 }
 
 void FusionRos::countResult(const std::string& kind, const fu::UpdateResult& result) {
@@ -474,7 +493,7 @@ void FusionRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
     rejectInput("imu", "no valid orientation (NaN, not a unit quaternion, or orientation_covariance[0] = -1)");
     return;
   }
-  if (!admitStamp(msg->header.stamp, "imu", false)) return;
+  if (!admitStamp(msg->header.stamp, "imu", false) || !inStreamOrder("imu", msg->header.stamp)) return;
   front_end_->addImuAttitude(msg->header.stamp.toSec(), toEigen(msg->orientation));
 }
 
@@ -491,6 +510,7 @@ void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
     rejectInput("altitude", "empty frame_id: the altimeter's mount on the vehicle is unknown");
     return;
   }
+  if (!inStreamOrder("altitude", msg->header.stamp)) return;
   front_end_->addAltimeterRange(msg->header.stamp.toSec(), r, msg->header.frame_id);
 }
 
@@ -500,6 +520,7 @@ void FusionRos::onDepth(const exocet_msgs::DepthConstPtr& msg) {
     return;
   }
   if (!admitStamp(msg->header.stamp, "depth", false)) return;
+  if (!inStreamOrder("depth", msg->header.stamp)) return;
   front_end_->addDepth(msg->header.stamp.toSec(), msg->depth_m);
 }
 

@@ -189,7 +189,10 @@ bool TileWriterRos::acceptTransport(const std::string& transport) {
 void TileWriterRos::reject(const std::string& why) {
   ++rejected_;
   last_problem_ = why;
-  ROS_ERROR_THROTTLE(5.0, "tile writer: %s", why.c_str());
+  // Throttled per kind of problem (the text's start): a frequent one must not hide another.
+  std::uint64_t held_back = 0;
+  if (reject_log_.allow(why.substr(0, 32), &held_back))
+    ROS_ERROR("tile writer: %s%s", why.c_str(), reject_log_.heldBackNote(held_back).c_str());
 }
 
 void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
@@ -445,6 +448,16 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
       k = frame.motion->camera_matrix;
       have_k = true;
     } else if (camera_info_ && camera_info_->K[0] > 0.0) {
+      const cv::Size calibrated(static_cast<int>(camera_info_->width), static_cast<int>(camera_info_->height));
+      const cv::Size size = !frame.image_size.empty() ? frame.image_size
+                            : !input.image.empty()    ? input.image.size()
+                                                      : calibrated;
+      if (!calibrated.empty() && size != calibrated) {
+        reject("image of " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+               " px, not the camera_info's " + std::to_string(calibrated.width) + "x" +
+               std::to_string(calibrated.height) + " px, and no camera matrix for it in its motion: not composed");
+        return;
+      }
       k = matrixFrom(camera_info_->K);
       have_k = true;
     }

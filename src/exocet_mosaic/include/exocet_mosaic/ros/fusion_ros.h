@@ -43,6 +43,7 @@
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/graph/loop_closer.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
+#include "exocet_mosaic/ros/keyed_throttle.h"
 
 namespace exocet_mosaic {
 
@@ -105,6 +106,8 @@ class FusionRos {
   bool admitStamp(const ros::Time& stamp, const std::string& what, bool late_allowed);
   void resetAll(const std::string& why);
   void rejectInput(const std::string& kind, const std::string& why);
+  /// False (the sample rejected) when a sample of the stream `kind` is stamped at or before the newest one.
+  bool inStreamOrder(const std::string& kind, const ros::Time& stamp);
   void countResult(const std::string& kind, const fusion::UpdateResult& result);
 
   /// Counts and logs what became of an input the front-end took; publishes where the input calls for it.
@@ -214,6 +217,8 @@ class FusionRos {
   // Counts for /diagnostics.
   uint64_t motions_ = 0, motion_failures_ = 0, dead_reckonings_ = 0, fixes_ = 0, resets_ = 0;
   std::map<std::string, uint64_t> applied_, gated_, too_old_, invalid_, rejected_inputs_;
+  KeyedThrottle rejection_log_{2.0};  ///< per kind of input
+  std::map<std::string, ros::Time> newest_sample_stamps_;  ///< of the interpolated streams (imu, altitude, depth)
   std::string last_problem_;
   ros::WallTime last_nav_wall_, last_motion_wall_;
 

@@ -59,6 +59,7 @@
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/registration/image_undistorter.h"
 #include "exocet_mosaic/ros/frame_assembler.h"
+#include "exocet_mosaic/ros/keyed_throttle.h"
 #include "exocet_mosaic/ros/tile_writer_parameters.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
@@ -267,6 +268,7 @@ class TileWriterRos {
   std::int64_t poses_ = 0, camera_heights_ = 0;  ///< fused poses and camera heights received
   std::int64_t tiles_written_ = 0, write_failures_ = 0, tiles_dropped_ = 0, udp_failures_ = 0;
   std::string last_problem_, last_write_error_;
+  KeyedThrottle reject_log_{5.0};  ///< callback thread
 };
 
 }  // namespace exocet_mosaic
