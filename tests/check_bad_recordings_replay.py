@@ -31,6 +31,7 @@ from rosgraph_msgs.msg import Log
 from std_srvs.srv import Trigger
 
 from bad_recordings import fault_named, write_faulty_bag
+from exocet_mosaic.testing import node_pid
 from exocet_mosaic.reliability import record_bad_recordings, workspace_bench_dir
 
 NODES = ['registration', 'fusion', 'tile_writer']
@@ -52,10 +53,6 @@ EXPECTED = {
 }
 
 
-def pid_of(node):
-    done = subprocess.run(['pgrep', '-f', '__name:=%s( |$)' % node], stdout=subprocess.PIPE, text=True)
-    pids = [int(p) for p in done.stdout.split()]
-    return pids[0] if len(pids) == 1 else None
 
 
 class BadRecordingsReplayTest(unittest.TestCase):
@@ -85,9 +82,9 @@ class BadRecordingsReplayTest(unittest.TestCase):
         rospy.Subscriber('/mosaic/odometry', Odometry, lambda m: cls.odometry.append(m.header.stamp.to_sec()),
                          queue_size=1000)
         deadline = time.time() + 60.0
-        while time.time() < deadline and any(pid_of(n) is None for n in NODES):
+        while time.time() < deadline and any(node_pid(n) is None for n in NODES):
             time.sleep(0.2)
-        cls.pids_before = {n: pid_of(n) for n in NODES}
+        cls.pids_before = {n: node_pid(n) for n in NODES}
         time.sleep(1.0)
         player = subprocess.Popen(['rosbag', 'play', '--clock', '-q', '-r', str(rospy.get_param('~rate')),
                                    '--queue=1000', '--wait-for-subscribers', cls.bag, '--topics',
@@ -104,7 +101,7 @@ class BadRecordingsReplayTest(unittest.TestCase):
         rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
         rospy.ServiceProxy('/tile_writer/flush', Trigger)()
         time.sleep(3.0)  # the last /diagnostics and log messages
-        cls.pids_after = {n: pid_of(n) for n in NODES}
+        cls.pids_after = {n: node_pid(n) for n in NODES}
 
     @classmethod
     def tearDownClass(cls):

@@ -4,8 +4,9 @@
 
 The sample out-and-back dive is replayed at 2x with `roslaunch exocet_mosaic replay.launch`, as a user runs it, on the
 test's master; the trajectory logger runs beside it (node_kill_replay.test). The registration, the tile writer, the
-fusion and the trajectory logger are each killed twice (SIGKILL, the pid found by its __name:= argument). Checked:
-- each node is started again by its launch file (a new pid, registered with the master) and its output goes on;
+fusion and the trajectory logger are each killed twice (SIGKILL, the pid asked to the node itself through the test's
+master: never another test's node of the same name). Checked:
+- each node is started again by its launch file (a new pid, answering through the master) and its output goes on;
 - the replay ends by itself (its replay_watcher) once the bag is over, and run_summary.json counts the run's tiles,
   the tile writer's restarts and the frames they lost;
 - the tiles: every index from 0 to the last once (one version each), no partial file, no orphan; each opens with
@@ -33,13 +34,13 @@ import unittest
 import dynamic_reconfigure.client
 import numpy as np
 import rosbag
-import rosgraph
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from exocet_msgs.msg import ImageMotion
 from nav_msgs.msg import Odometry
 
+from exocet_mosaic.testing import node_pid
 from exocet_mosaic.reliability import update_reliability, workspace_bench_dir
 from exocet_mosaic.tile_analysis import Tile, find_checker_saddle, parse_tile_name
 
@@ -50,19 +51,8 @@ KILLS = [('registration', 14.0), ('tile_writer', 20.0), ('fusion', 30.0), ('traj
 BACK_TIMEOUT_S = 20.0  # wall seconds for a node to be running again (respawn_delay 1 s, start-up)
 
 
-def pid_of(node):
-    """Pid of the process started as node `node` (its __name:= argument), or None."""
-    done = subprocess.run(['pgrep', '-f', '__name:=%s( |$)' % node], stdout=subprocess.PIPE, text=True)
-    pids = [int(p) for p in done.stdout.split()]
-    return pids[0] if len(pids) == 1 else None
 
 
-def registered(node):
-    try:
-        rosgraph.Master('/check_node_kill_replay').lookupNode('/' + node)
-        return True
-    except Exception:  # not registered (yet), or the master is busy: the caller asks again
-        return False
 
 
 class NodeKillReplayTest(unittest.TestCase):
@@ -120,16 +110,15 @@ class NodeKillReplayTest(unittest.TestCase):
         atexit.register(lambda: launch.poll() is None and os.killpg(launch.pid, signal.SIGKILL))
         # Smaller mosaics than the preset's: more tiles, more writes to be killed in. On the parameter server through
         # dynamic_reconfigure, so that a restarted writer reads it too.
-        self.assertTrue(self.wait_for(lambda: registered('tile_writer'), 60.0), 'the tile writer comes up')
+        self.assertTrue(self.wait_for(lambda: node_pid('tile_writer') is not None, 60.0), 'the tile writer comes up')
         dynamic_reconfigure.client.Client('/tile_writer', timeout=30.0).update_configuration({'frames_per_mosaic': 60})
 
         kills = []
         for node, at_s in KILLS:
             self.assertTrue(self.wait_for(lambda: self.dive_time() >= at_s, 120.0, 0.02),
                             'the replay reaches %.0f s of dive' % at_s)
-            pid = None
-            self.wait_for(lambda: pid_of(node) is not None, 10.0)
-            pid = pid_of(node)
+            self.wait_for(lambda: node_pid(node) is not None, 10.0)
+            pid = node_pid(node)
             self.assertIsNotNone(pid, '%s runs before its kill at %.0f s' % (node, at_s))
             kill = {'node': node, 'dive_s': round(self.dive_time(), 2), 'clock_s': rospy.get_rostime().to_sec(),
                     'pid': pid}
@@ -144,7 +133,7 @@ class NodeKillReplayTest(unittest.TestCase):
             if node == 'tile_writer':
                 published = sum(1 for s in self.image_stamps if newest < s <= kill['clock_s'] + 0.5)
                 kill['held_bound'] = held + published
-            back = self.wait_for(lambda: pid_of(node) not in (None, pid) and registered(node), BACK_TIMEOUT_S)
+            back = self.wait_for(lambda: node_pid(node) not in (None, pid), BACK_TIMEOUT_S)
             kill['back'] = back
             kill['back_after_s'] = round(time.time() - kill['wall'], 1)
             if node == 'tile_writer' and back:
