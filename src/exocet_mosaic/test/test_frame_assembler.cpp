@@ -43,7 +43,8 @@ TEST(FrameAssembler, ReleasesCompleteFramesInStampOrderWhateverTheArrivalOrder) 
 TEST(FrameAssembler, ARepeatedImageStampKeepsTheFirstImageAndIsCounted) {
   FrameAssembler assembler(10.0, 100);
   EXPECT_TRUE(assembler.addImage(1, image(), 0.0));
-  EXPECT_FALSE(assembler.addImage(1, []() { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)); }, 0.0));
+  EXPECT_FALSE(assembler.addImage(
+      1, []() { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)); }, 0.0));
   EXPECT_EQ(assembler.duplicateImages(), 1);
   EXPECT_EQ(assembler.pendingImages(), 1u);
   const auto out = assembler.popAll();

@@ -206,7 +206,9 @@ void NavigationFilter::startAt(double stamp_s, const StateVector& x, const State
   rewind_floor_s_ = -std::numeric_limits<double>::infinity();
 }
 
-bool NavigationFilter::drOffsetKnown() const { return initialized_ && !log_.steps.empty() && log_.steps.back().dr_initialized; }
+bool NavigationFilter::drOffsetKnown() const {
+  return initialized_ && !log_.steps.empty() && log_.steps.back().dr_initialized;
+}
 
 void NavigationFilter::setKeepLog(bool keep) {
   keep_log_ = keep;

@@ -63,7 +63,8 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     std::filesystem::create_directories(images_dir_, error);
     if (error) ROS_ERROR("tile writer: cannot create %s: %s", images_dir_.c_str(), error.message().c_str());
   }
-  const int stale = writer_->removeStaleTemporaries() + (images_dir_.empty() ? 0 : tiles::removeTemporariesIn(images_dir_));
+  const int stale =
+      writer_->removeStaleTemporaries() + (images_dir_.empty() ? 0 : tiles::removeTemporariesIn(images_dir_));
   if (stale > 0) ROS_WARN("tile writer: removed %d partial file(s) left by an interrupted run", stale);
   const int incomplete = writer_->removeIncompleteTiles();
   if (incomplete > 0)
@@ -1333,9 +1334,11 @@ void TileWriterRos::loadPreviousRun() {
   }
   if (config_.keep_images) {
     kept_tiles_ = tiles::loadKeptTiles(images_dir_, *writer_);
-    for (const std::string& problem : kept_tiles_.problems) ROS_WARN("tile writer: record left out: %s", problem.c_str());
+    for (const std::string& problem : kept_tiles_.problems)
+      ROS_WARN("tile writer: record left out: %s", problem.c_str());
     if (kept_tiles_.versions_removed > 0)
-      ROS_WARN("tile writer: removed %d older tile version(s) an interrupted redraw had left", kept_tiles_.versions_removed);
+      ROS_WARN("tile writer: removed %d older tile version(s) an interrupted redraw had left",
+               kept_tiles_.versions_removed);
   }
   ROS_INFO(
       "tile writer: %s holds a run that %s (%lld tiles, newest image at %.3f s): carried on if the first image comes "
@@ -1449,8 +1452,9 @@ void TileWriterRos::saveProgress(bool finished) {
   progress.newest_stamp_s = newest_image_stamp_s_;
   progress.finished = finished;
   try {
-    exocet_common::writeJsonFileAtomically(tiles::tileWriterProgressPath(config_.files.output_dir, config_.files.prefix),
-                                           tiles::tileWriterProgressToJson(progress));
+    exocet_common::writeJsonFileAtomically(
+        tiles::tileWriterProgressPath(config_.files.output_dir, config_.files.prefix),
+        tiles::tileWriterProgressToJson(progress));
   } catch (const std::exception& e) {
     ++progress_failures_;
     last_progress_error_ = e.what();

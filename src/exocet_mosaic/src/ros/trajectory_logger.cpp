@@ -181,8 +181,9 @@ class TrajectoryLogger::CsvFile {
     }
     const size_t header_end = text.find('\n');
     const size_t last_start = text.rfind('\n', text.size() - 2);
-    *last_row = last_start == std::string::npos || last_start < header_end ? std::string()
-                                                                           : text.substr(last_start + 1, text.size() - last_start - 2);
+    *last_row = last_start == std::string::npos || last_start < header_end
+                    ? std::string()
+                    : text.substr(last_start + 1, text.size() - last_start - 2);
     bytes_on_disk_ = whole;
     lines_on_disk_ = 1;  // this run's rows are counted from here, as after the header of a new file
   }
@@ -543,12 +544,14 @@ std::unique_ptr<TrajectoryLogger::FileSet> TrajectoryLogger::reopenNewestFileSet
   set->datum_path = base + "datum" + suffix + ".json";
   std::string last_rows[3];
   try {
-    set->ground_truth = std::make_unique<CsvFile>(base + "ground_truth" + suffix + ".csv", CsvFile::Append(), &last_rows[0]);
-    set->navigation = std::make_unique<CsvFile>(base + "navigation" + suffix + ".csv", CsvFile::Append(), &last_rows[1]);
+    set->ground_truth =
+        std::make_unique<CsvFile>(base + "ground_truth" + suffix + ".csv", CsvFile::Append(), &last_rows[0]);
+    set->navigation =
+        std::make_unique<CsvFile>(base + "navigation" + suffix + ".csv", CsvFile::Append(), &last_rows[1]);
     set->usbl = std::make_unique<CsvFile>(base + "usbl_fixes" + suffix + ".csv", CsvFile::Append(), &last_rows[2]);
   } catch (const std::exception& e) {
-    ROS_WARN("the newest trajectory files in %s cannot be appended to (%s): a new set is started", output_dir_abs_.c_str(),
-             e.what());
+    ROS_WARN("the newest trajectory files in %s cannot be appended to (%s): a new set is started",
+             output_dir_abs_.c_str(), e.what());
     return nullptr;
   }
   for (const std::string& row : last_rows) {
@@ -576,17 +579,20 @@ void TrajectoryLogger::decideOnReopenedSet(const ros::Time& stamp) {
     if (gap_s < -kStampJumpThreshold_s)
       why = "the first message is stamped " + formatNumber(-gap_s) + " s before their last row (a bag played again)";
     else if (gap_s > config_.resume_max_gap_s)
-      why = "the first message is stamped " + formatNumber(gap_s) + " s after their last row, more than "
-            "~resume_max_gap_s = " + formatNumber(config_.resume_max_gap_s) + " s (another dive)";
+      why = "the first message is stamped " + formatNumber(gap_s) +
+            " s after their last row, more than "
+            "~resume_max_gap_s = " +
+            formatNumber(config_.resume_max_gap_s) + " s (another dive)";
   }
   if (why.empty()) {
     if (have_datum_) writeDatumFile(current_set_.get());
     resume_note_ = "appending to the set '" + suffixFor(current_set_->index) + "' left by a run interrupted at " +
                    formatStamp(reopened_last_stamp_);
-    ROS_WARN("%s: continuing the trajectory files of a run interrupted at %s (a restart): the rows are appended to "
-             "%s/*%s.csv",
-             formatStamp(stamp).c_str(), formatStamp(reopened_last_stamp_).c_str(), output_dir_abs_.c_str(),
-             suffixFor(current_set_->index).c_str());
+    ROS_WARN(
+        "%s: continuing the trajectory files of a run interrupted at %s (a restart): the rows are appended to "
+        "%s/*%s.csv",
+        formatStamp(stamp).c_str(), formatStamp(reopened_last_stamp_).c_str(), output_dir_abs_.c_str(),
+        suffixFor(current_set_->index).c_str());
     return;
   }
   std::unique_ptr<FileSet> next;
@@ -601,9 +607,10 @@ void TrajectoryLogger::decideOnReopenedSet(const ros::Time& stamp) {
   current_set_ = std::move(next);
   if (have_datum_) writeDatumFile(current_set_.get());
   resume_note_ = "a new set: " + why;
-  ROS_WARN("%s already holds trajectory files of an earlier run (%s): writing this run's with the suffix '%s' "
-           "(nothing is overwritten)",
-           output_dir_abs_.c_str(), why.c_str(), suffixFor(current_set_->index).c_str());
+  ROS_WARN(
+      "%s already holds trajectory files of an earlier run (%s): writing this run's with the suffix '%s' "
+      "(nothing is overwritten)",
+      output_dir_abs_.c_str(), why.c_str(), suffixFor(current_set_->index).c_str());
 }
 
 void TrajectoryLogger::startNewFileSet(const std::string& reason) {

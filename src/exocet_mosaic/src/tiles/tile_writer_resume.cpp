@@ -159,7 +159,8 @@ PositionCorrectionTrack readPositionCorrections(const std::string& path, int* le
     double t = 0, e = 0, n = 0;
     char c1 = 0, c2 = 0;
     if (!(fields >> t >> c1 >> e >> c2 >> n) || c1 != ',' || c2 != ',')
-      throw std::invalid_argument("'" + path + "' line " + std::to_string(number) + ": expected stamp_s,east_m,north_m");
+      throw std::invalid_argument("'" + path + "' line " + std::to_string(number) +
+                                  ": expected stamp_s,east_m,north_m");
     stamps.push_back(t);
     values.emplace_back(e, n);
   }

@@ -217,15 +217,15 @@ class FusionRos {
   // Counts for /diagnostics.
   uint64_t motions_ = 0, motion_failures_ = 0, dead_reckonings_ = 0, fixes_ = 0, resets_ = 0;
   std::map<std::string, uint64_t> applied_, gated_, too_old_, invalid_, rejected_inputs_;
-  KeyedThrottle rejection_log_{2.0};  ///< per kind of input
+  KeyedThrottle rejection_log_{2.0};                       ///< per kind of input
   std::map<std::string, ros::Time> newest_sample_stamps_;  ///< of the interpolated streams (imu, altitude, depth)
   std::string last_problem_;
   ros::WallTime last_nav_wall_, last_motion_wall_;
 
   // Restart mid-dive.
   std::optional<fusion::SavedFusionState> saved_state_;  ///< read at start, decided on at the first input
-  std::string started_from_;                              ///< what started the filter last
-  std::string resume_note_;                               ///< what became of the saved state
+  std::string started_from_;                             ///< what started the filter last
+  std::string resume_note_;                              ///< what became of the saved state
   ros::SteadyTime last_state_save_;
   uint64_t state_saves_ = 0, state_save_failures_ = 0;
 };

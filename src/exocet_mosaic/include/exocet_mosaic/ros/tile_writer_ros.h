@@ -32,12 +32,12 @@
 #include <atomic>
 #include <condition_variable>
 #include <deque>
-#include <map>
-#include <set>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -179,7 +179,7 @@ class TileWriterRos {
   std::string active_transport_;
   std::optional<std::int64_t> newest_stamp_ns_;
   std::optional<std::int64_t> last_composed_stamp_ns_;
-  std::atomic<int> next_frame_index_{0};  ///< frames are numbered across the run's instances
+  std::atomic<int> next_frame_index_{0};     ///< frames are numbered across the run's instances
   std::vector<double> tile_fused_sigmas_m_;  ///< fused 1-sigma of the open mosaic's images (m)
   sensor_msgs::CameraInfoConstPtr camera_info_;
   // Shared with the loaders of images not decoded yet (the composer may decode one after a calibration change).
@@ -250,17 +250,17 @@ class TileWriterRos {
   std::optional<tiles::TileWriterProgress> previous_run_;  ///< found in the folder at start-up
   tiles::KeptTiles kept_tiles_;                            ///< the interrupted run's records, until decideRun()
   std::atomic<bool> run_decided_{false};
-  std::string run_note_;                                   ///< new run or continued, and why (callback thread)
-  tiles::TileWriterProgress run_base_;   ///< counts of the run's earlier instances (write_mutex_)
-  int frames_lost_at_restart_ = -1;      ///< -1: this instance did not carry a run on (write_mutex_)
-  int newest_frame_on_disk_ = -1;        ///< last frame of the newest tile written (write_mutex_)
+  std::string run_note_;                ///< new run or continued, and why (callback thread)
+  tiles::TileWriterProgress run_base_;  ///< counts of the run's earlier instances (write_mutex_)
+  int frames_lost_at_restart_ = -1;     ///< -1: this instance did not carry a run on (write_mutex_)
+  int newest_frame_on_disk_ = -1;       ///< last frame of the newest tile written (write_mutex_)
   std::atomic<double> newest_image_stamp_s_{0.0};
-  std::mutex progress_mutex_;            ///< one progress write at a time (writer thread and timer)
+  std::mutex progress_mutex_;  ///< one progress write at a time (writer thread and timer)
   ros::WallTime last_progress_wall_;
-  std::int64_t progress_images_ = -1;    ///< images_ at the last progress save (timer)
-  std::int64_t progress_failures_ = 0;   ///< (progress_mutex_)
-  std::string last_progress_error_;      ///< (progress_mutex_)
-  std::vector<std::string> levels_to_load_;  ///< kept image files whose levels the gains still need (image_gains_mutex_)
+  std::int64_t progress_images_ = -1;        ///< images_ at the last progress save (timer)
+  std::int64_t progress_failures_ = 0;       ///< (progress_mutex_)
+  std::string last_progress_error_;          ///< (progress_mutex_)
+  std::vector<std::string> levels_to_load_;  ///< kept images whose levels the gains need (image_gains_mutex_)
 
   // Counters for /diagnostics.
   std::atomic<std::int64_t> images_{0};

@@ -21,16 +21,16 @@ namespace tiles {
 
 /// A run's progress: each instance of the writer saves it; the next instance reads it when it starts.
 struct TileWriterProgress {
-  int next_frame = 0;            ///< index the next image takes (frames numbered across the run's instances)
+  int next_frame = 0;  ///< index the next image takes (frames numbered across the run's instances)
   /// Frames received but in no tile on disk yet: the open mosaic, the images waiting for their pose, closed mosaics
   /// not written. What a crash at that moment loses.
   int frames_not_on_disk = 0;
-  double newest_stamp_s = 0.0;   ///< stamp of the newest image received (s)
-  std::int64_t tiles_written = 0;     ///< by every instance of the run
-  std::int64_t images_received = 0;   ///< by every instance of the run
-  std::int64_t frames_composed = 0;   ///< by every instance of the run
-  std::int64_t frames_lost = 0;       ///< frames lost by the run's crashes (frames_not_on_disk at each)
-  int restarts = 0;                   ///< instances that carried the run on after a crash
+  double newest_stamp_s = 0.0;       ///< stamp of the newest image received (s)
+  std::int64_t tiles_written = 0;    ///< by every instance of the run
+  std::int64_t images_received = 0;  ///< by every instance of the run
+  std::int64_t frames_composed = 0;  ///< by every instance of the run
+  std::int64_t frames_lost = 0;      ///< frames lost by the run's crashes (frames_not_on_disk at each)
+  int restarts = 0;                  ///< instances that carried the run on after a crash
   /// The instance ended normally (everything it held flushed): nothing was lost, and an instance that receives no
   /// image leaves the run's summary as it is.
   bool finished = false;
@@ -58,10 +58,10 @@ std::string continuationRefusal(const TileWriterProgress& previous, double first
 
 /// The records of the tiles an interrupted run wrote, as loadKeptTiles() found them.
 struct KeptTiles {
-  std::vector<TileRecord> records;       ///< by index, each at the version on disk
-  int unreadable = 0;                    ///< records left out: not readable, or their tile is gone
-  int versions_removed = 0;              ///< older versions an interrupted redraw left beside the newer one
-  std::vector<std::string> problems;     ///< what was left out and why, one line each
+  std::vector<TileRecord> records;    ///< by index, each at the version on disk
+  int unreadable = 0;                 ///< records left out: not readable, or their tile is gone
+  int versions_removed = 0;           ///< older versions an interrupted redraw left beside the newer one
+  std::vector<std::string> problems;  ///< what was left out and why, one line each
 };
 
 /**
