@@ -81,7 +81,7 @@ std::string resumeRefusal(double saved_stamp_s, double first_input_stamp_s, doub
   const double age_s = first_input_stamp_s - saved_stamp_s;
   if (!std::isfinite(age_s)) {
     why << "the first input's stamp is not finite";
-  } else if (age_s < -kResumeBackToleranceS) {
+  } else if (age_s <= 0.0) {
     why << "the first input is stamped " << -age_s
         << " s before the saved state (a bag played again from its start, or another dive)";
   } else if (age_s > max_age_s) {

@@ -1,5 +1,6 @@
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <stdexcept>
@@ -61,16 +62,19 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
 
 }  // namespace
 
-std::string defaultFusionStateFile() {
+std::string defaultFusionStateFile(const std::string& private_namespace) {
+  std::string node = private_namespace;
+  std::replace(node.begin(), node.end(), '/', '_');
+  const std::string name = "/exocet_fusion_state" + node + ".json";
   const char* ros_home = std::getenv("ROS_HOME");
-  if (ros_home != nullptr && *ros_home != '\0') return std::string(ros_home) + "/exocet_fusion_state.json";
+  if (ros_home != nullptr && *ros_home != '\0') return std::string(ros_home) + name;
   const char* home = std::getenv("HOME");
-  return std::string(home != nullptr ? home : ".") + "/.ros/exocet_fusion_state.json";
+  return std::string(home != nullptr ? home : ".") + "/.ros" + name;
 }
 
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   FusionNodeConfig c;
-  c.state_file = defaultFusionStateFile();
+  c.state_file = defaultFusionStateFile(private_nh.getNamespace());
   const exocet_common::ParameterReader params(private_nh);
   readFilterConfig(ros::NodeHandle(private_nh, "filter"), &c.filter);
 

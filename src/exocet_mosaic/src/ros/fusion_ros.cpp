@@ -143,6 +143,9 @@ bool FusionRos::admitStamp(const ros::Time& stamp, const std::string& what, bool
     rejectInput(what, "zero stamp");
     return false;
   }
+  // A saved state is decided on at the first sensor input (a late fix may be stamped before the state and still
+  // belong to the dive), before anything reaches the filter.
+  if (saved_state_ && what != "fix") maybeResume(t);
   if (have_stamp_ && t < newest_stamp_s_ - config_.clock_jump_s) {
     std::ostringstream why;
     why << what << " stamped " << std::fixed << std::setprecision(3) << newest_stamp_s_ - t
@@ -478,7 +481,6 @@ void FusionRos::release(bool everything) {
             stamp_s <= newest_stamp_s_ - config_.reorder_delay_s - kAttitudeWait_s);
   };
   while (!queue_.empty() && (everything || due(queue_.begin()->first))) {
-    if (saved_state_) maybeResume(queue_.begin()->first);
     auto apply = std::move(queue_.begin()->second);
     queue_.erase(queue_.begin());
     apply();

@@ -37,15 +37,12 @@ SavedFusionState savedFusionStateFromJson(const nlohmann::json& json);
 
 /**
  * @brief Why a state saved at `saved_stamp_s` must not start the filter at the first input, stamped
- * `first_input_stamp_s`; empty when it may. It may when the first input comes after it (a restart carries the same
- * clock on) by at most `max_age_s`, or before it by at most kResumeBackToleranceS (a late fix, an input that was in
- * flight); an input stamped further before it is a bag played again from its start or another dive, one much later
- * is another dive or too long a gap for the state to mean anything.
+ * `first_input_stamp_s` (a sensor's, not a late fix's); empty when it may. It may when the first input comes after
+ * it (a restart carries the same clock on) by at most `max_age_s`; an input stamped at or before it is a bag played
+ * again from its start or another dive, one much later is another dive or too long a gap for the state to mean
+ * anything.
  */
 std::string resumeRefusal(double saved_stamp_s, double first_input_stamp_s, double max_age_s);
-
-/// How far before a saved state the first input may be stamped and the state still be resumed (s).
-constexpr double kResumeBackToleranceS = 2.0;
 
 }  // namespace fusion
 }  // namespace exocet_mosaic

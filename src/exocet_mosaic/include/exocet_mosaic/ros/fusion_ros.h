@@ -64,9 +64,9 @@ namespace exocet_mosaic {
  * CSV when ~track_csv / ~smoothed_track_csv are set.
  *
  * The last published state is kept in ~state_file (at most every ~state_save_period_s): a fusion restarted mid-dive
- * (a crash, a respawn) starts its filter from it, the gap predicted as one without image motion, when its first input
- * comes within ~state_max_age_s after it (fusion::resumeRefusal); otherwise (a bag played again, another dive) it
- * ignores it and says why.
+ * (a crash, a respawn) starts its filter from it, the gap predicted as one without image motion, when its first
+ * sensor input comes within ~state_max_age_s after it (fusion::resumeRefusal); otherwise (a bag played again, another
+ * dive) it ignores it and says why.
  */
 class FusionRos {
  public:
@@ -121,7 +121,8 @@ class FusionRos {
   void initializeFromParameters();
   /// Reads ~state_file (when set and present) for the first input to decide on.
   void loadSavedState();
-  /// Before the first input reaches the filter: starts it from the saved state when that belongs to this dive.
+  /// At the first sensor input (before anything reaches the filter): starts the filter from the saved state when
+  /// that belongs to this dive.
   void maybeResume(double first_stamp_s);
   /// Writes the filter's state to ~state_file, at most every ~state_save_period_s unless `now`.
   void saveState(bool now);
