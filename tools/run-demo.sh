@@ -51,7 +51,7 @@ duration_s=$(rosbag info --yaml --key=duration "$bag") || {
   exit 1
 }
 # Generous: replay time, twice over, plus start-up and shutdown. roslaunch ends on its own when the bag ends
-# (rosbag play is required); the timeout only guards against a node that hangs.
+# (its replay_watcher is required); the timeout only guards against a node that hangs.
 limit_s=$(python3 -c "import math; print(int(math.ceil(2.0 * $duration_s / $rate)) + 120)")
 
 rm -rf "$out"
@@ -69,9 +69,10 @@ if [[ $status -ne 0 ]]; then
   tail -n 30 "$log" >&2
   exit 1
 fi
-# A required node that fails ends the launch early, and roslaunch still exits 0: say so rather than plot a part.
-# The tile writer ending cleanly is the normal end (it exits once the chain is drained).
-if grep -A1 -E "REQUIRED process \[" "$log" | grep -v -E "REQUIRED process \[tile_writer-|finished cleanly|^--" |
+# The replay_watcher ending cleanly is the normal end (the tile writer has written its last tile); its failure (the
+# player failed or never started: a node did not come up) ends the launch early, and roslaunch still exits 0: say so
+# rather than plot a part.
+if grep -A1 -E "REQUIRED process \[" "$log" | grep -v -E "REQUIRED process \[replay_watcher-|finished cleanly|^--" |
   grep -q .; then
   echo "run-demo: a node failed before the end of the bag; from $log:" >&2
   grep -E "FATAL|ERROR|REQUIRED process" "$log" | head -n 20 >&2

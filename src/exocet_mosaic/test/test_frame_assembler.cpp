@@ -40,6 +40,20 @@ TEST(FrameAssembler, ReleasesCompleteFramesInStampOrderWhateverTheArrivalOrder) 
   EXPECT_EQ(assembler.lateParts(), 1);
 }
 
+TEST(FrameAssembler, ARepeatedImageStampKeepsTheFirstImageAndIsCounted) {
+  FrameAssembler assembler(10.0, 100);
+  EXPECT_TRUE(assembler.addImage(1, image(), 0.0));
+  EXPECT_FALSE(assembler.addImage(
+      1, []() { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)); }, 0.0));
+  EXPECT_EQ(assembler.duplicateImages(), 1);
+  EXPECT_EQ(assembler.pendingImages(), 1u);
+  const auto out = assembler.popAll();
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_EQ(out[0].decode_image().at<uchar>(0, 0), 7);
+  EXPECT_FALSE(assembler.addImage(1, image(), 0.1)) << "released: late";
+  EXPECT_EQ(assembler.lateParts(), 1);
+}
+
 TEST(FrameAssembler, WaitsForMissingPartsUntilTheTimeoutThenReleasesWhatItHas) {
   FrameAssembler assembler(2.0, 100);
   assembler.addImage(10, image(), 0.0);

@@ -144,6 +144,17 @@ TEST(SequenceRegistrar, BadInputIsRefusedAndLeavesTheSequenceAsItWas) {
   const SequenceStep next = sequence.add(image(), 1.04);
   EXPECT_TRUE(next.has_motion);
   EXPECT_DOUBLE_EQ(next.previous_stamp_s, 1.0);
+  // A duplicated stamp (an image sent twice): skipped, the sequence goes on from the first one, no restart.
+  try {
+    sequence.add(image(), 1.04);
+    ADD_FAILURE() << "a duplicated stamp was registered";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("duplicated stamp"), std::string::npos) << e.what();
+  }
+  const SequenceStep after = sequence.add(image(), 1.08);
+  EXPECT_TRUE(after.has_motion);
+  EXPECT_TRUE(after.restart_reason.empty()) << after.restart_reason;
+  EXPECT_DOUBLE_EQ(after.previous_stamp_s, 1.04);
 }
 
 TEST(SequenceRegistrar, InvalidSettingsAndAMissingRegistrarAreNamed) {

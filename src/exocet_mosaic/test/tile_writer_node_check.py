@@ -28,14 +28,15 @@ def seabed(seed=3):
     return (255 * (smooth - smooth.min()) / np.ptp(smooth)).astype(np.uint8)
 
 
-def publish_frames(publishers, count, start, bad_pose_at=None, bad_image_at=None):
+def publish_frames(publishers, count, start, bad_pose_at=None, bad_image_at=None, first=0):
     """Publishes `count` frames of a nadir camera moving east over seabed(), 0.2 s apart from `start`: the image, its
     motion from the previous one, the fused pose (NaN at bad_pose_at) and the camera height; at bad_image_at a corrupt
-    JPEG on the compressed stream. publishers: dict of images, compressed, motions, odometry, heights."""
+    JPEG on the compressed stream. publishers: dict of images, compressed, motions, odometry, heights. `first`: the
+    frame to start at, to go on from an earlier call (stamps, place and motion carry on)."""
     texture = seabed()
-    previous = None
-    for i in range(count):
-        stamp = start + rospy.Duration(0.2 * i)
+    previous = start - rospy.Duration(0.2) if first > 0 else None
+    for i in range(first, first + count):
+        stamp = start + rospy.Duration(0.2 * (i - first))
         image = Image()
         image.header.stamp = stamp
         image.header.frame_id = 'camera_optical'

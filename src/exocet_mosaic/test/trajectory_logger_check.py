@@ -387,7 +387,9 @@ class TrajectoryLoggerTest(unittest.TestCase):
 
     def test_rows_survive_shutdown_and_crash(self):
         """Rows reach the disk at shutdown (long flush period) and, after a kill, every flushed row is whole; a
-        second run in the same folder writes suffixed files instead of overwriting."""
+        second run in the same folder whose stamps go back (a bag played again) writes suffixed files instead of
+        overwriting; a logger restarted after the kill, its stamps going on, appends to the files of the killed one
+        (the partial row a crash can leave cut off)."""
         first = self.start('logger_shutdown', flush_period_s=60.0)
         pubs = self.connect(first)
         self.set_clock(1.0)
@@ -405,8 +407,8 @@ class TrajectoryLoggerTest(unittest.TestCase):
         second = self.start('logger_crash', flush_period_s=0.2)
         pubs = self.connect(second)
         self.set_clock(2.0)
-        for k in range(30):
-            pubs['ground_truth'].publish(self.odometry(2.0 + 0.02 * k, 1.0 * k, 2.0, 3.0, (0.0, 0.0, 0.0)))
+        for k in range(30):  # 1.5 s before the first run's last row: another timeline
+            pubs['ground_truth'].publish(self.odometry(0.5 + 0.02 * k, 1.0 * k, 2.0, 3.0, (0.0, 0.0, 0.0)))
         self.wait_rows(os.path.join(self.folder, 'ground_truth_2.csv'), 30)
         second.process.send_signal(signal.SIGKILL)
         second.wait_exit()
@@ -417,6 +419,27 @@ class TrajectoryLoggerTest(unittest.TestCase):
         self.assertEqual(len(lines), 31)
         self.assertTrue(all(len(line.split(',')) == len(GT_COLUMNS) for line in lines))
         self.assertEqual(len(read_rows(os.path.join(self.folder, 'ground_truth.csv'))[1]), 50, 'not overwritten')
+
+        # The crash cut a row in the middle; the restarted logger goes on with the next stamps.
+        with open(os.path.join(self.folder, 'ground_truth_2.csv'), 'a') as f:
+            f.write('1.100000000,3.5,2')
+        third = self.start('logger_restarted', flush_period_s=0.2)
+        pubs = self.connect(third)
+        self.set_clock(3.0)
+        resumed = []
+        for k in range(20):
+            m = self.odometry(1.2 + 0.02 * k, 40.0 + k, 2.0, 3.0, (0.0, 0.0, 0.0))
+            pubs['ground_truth'].publish(m)
+            resumed.append(m)
+        self.wait_rows(os.path.join(self.folder, 'ground_truth_2.csv'), 50)
+        self.assertEqual(third.stop(), 0, third.output())
+        self.assertIn('continuing the trajectory files', third.output())
+        self.assertFalse(os.path.exists(os.path.join(self.folder, 'ground_truth_3.csv')), 'no new set after a restart')
+        header, rows = read_rows(os.path.join(self.folder, 'ground_truth_2.csv'))
+        self.assertEqual(header, GT_COLUMNS)
+        self.assertEqual(len(rows), 50, 'the killed logger\'s 30 rows, then the restarted one\'s 20')
+        self.assertTrue(all(len(r) == len(GT_COLUMNS) for r in rows), 'the partial row is cut off')
+        self.assertEqual([r[0] for r in rows[30:]], [stamp_text(m.header.stamp) for m in resumed])
 
     def test_bad_parameters_fail_at_start_up(self):
         """Each bad parameter stops the node at once (exit 1) with a message naming it and its allowed range."""

@@ -1,6 +1,7 @@
 """Helpers shared by the Python tests of Exocet (rostest checkers): an independent WGS 84 -> UTM conversion to check
-GeographicLib's, and the exact text of a ROS time as the nodes write it."""
+GeographicLib's, the exact text of a ROS time as the nodes write it, and the pid of a node of this test's master."""
 import math
+import xmlrpc.client
 
 
 def lat_lon_to_utm(lat_deg, lon_deg, zone, northern):
@@ -56,3 +57,29 @@ def utm_to_lat_lon(easting_m, northing_m, zone, northern):
 def stamp_text(stamp):
     """A ROS time as the loggers print it: seconds and nanoseconds, exactly."""
     return '%d.%09d' % (stamp.secs, stamp.nsecs)
+
+
+class _TimeoutTransport(xmlrpc.client.Transport):
+    def __init__(self, timeout_s):
+        super().__init__()
+        self.timeout_s = timeout_s
+
+    def make_connection(self, host):
+        connection = super().make_connection(host)
+        connection.timeout = self.timeout_s
+        return connection
+
+
+def node_pid(node, timeout_s=2.0):
+    """Pid of the node registered as `node` with this process's master (ROS_MASTER_URI), asked to the node itself
+    through its XML-RPC API; None when it is not registered or does not answer (killed, not up yet). A process found
+    by its name on the machine (pgrep) could be another test's node, under another master."""
+    import rosgraph  # only the tests that need it import ROS
+    name = node if node.startswith('/') else '/' + node
+    try:
+        uri = rosgraph.Master('/exocet_test_node_pid').lookupNode(name)
+        code, _, pid = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout_s)).getPid(
+            '/exocet_test_node_pid')
+        return int(pid) if code == 1 else None
+    except Exception:  # not registered, refused, timed out: no answer
+        return None

@@ -126,6 +126,12 @@ void FusionFrontEnd::initialize(double stamp_s, const Eigen::Vector2d& camera_en
   pending_start_en_m_.reset();
 }
 
+void FusionFrontEnd::resume(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known) {
+  filter_.resume(stamp_s, x, P, dr_offset_known);
+  image_only_en_m_ = x.segment<2>(kEast);
+  pending_start_en_m_.reset();
+}
+
 void FusionFrontEnd::start(double stamp_s, const Eigen::Vector2d& camera_en_m, double sigma_m,
                            const std::string& source, InputOutcome* outcome) {
   initialize(stamp_s, camera_en_m, Eigen::Matrix2d::Identity() * sigma_m * sigma_m);

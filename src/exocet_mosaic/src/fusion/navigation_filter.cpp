@@ -167,7 +167,6 @@ void NavigationFilter::initialize(double stamp_s, const Eigen::Vector2d& camera_
   if (!camera_en_m.allFinite()) throw std::invalid_argument("initialize: camera_en_m is not finite");
   const std::string problem = covarianceProblem(covariance_m2, "initialize: covariance_m2");
   if (!problem.empty()) throw std::invalid_argument(problem);
-  reset();
   StateVector x = StateVector::Zero();
   x.segment<2>(kEast) = camera_en_m;
   StateMatrix P = StateMatrix::Zero();
@@ -176,15 +175,39 @@ void NavigationFilter::initialize(double stamp_s, const Eigen::Vector2d& camera_
   P(kHeading, kHeading) = std::pow(config_.initial_heading_sigma_rad, 2);
   P(kHeadingDrift, kHeadingDrift) = std::pow(config_.initial_heading_drift_sigma_rps, 2);
   P(kDrScale, kDrScale) = std::pow(config_.initial_dr_scale_sigma, 2);
+  startAt(stamp_s, x, P, false);
+}
+
+void NavigationFilter::resume(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known) {
+  if (!std::isfinite(stamp_s)) throw std::invalid_argument("resume: stamp_s is not finite");
+  if (!x.allFinite()) throw std::invalid_argument("resume: the state is not finite");
+  if (!P.allFinite() || !P.isApprox(P.transpose(), 1e-9 * (1.0 + P.cwiseAbs().maxCoeff())))
+    throw std::invalid_argument("resume: the covariance is not finite and symmetric");
+  const Eigen::SelfAdjointEigenSolver<StateMatrix> eigen(0.5 * (P + P.transpose()));
+  if (eigen.info() != Eigen::Success || eigen.eigenvalues().minCoeff() < 0.0)
+    throw std::invalid_argument("resume: the covariance is not positive semi-definite");
+  const std::string problem = covarianceProblem(P.block<2, 2>(kEast, kEast), "resume: the position covariance");
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  startAt(stamp_s, x, 0.5 * (P + P.transpose()), dr_offset_known);
+}
+
+void NavigationFilter::startAt(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known) {
+  reset();
   FilterStep first;
   first.stamp_s = stamp_s;
   first.x_prior = first.x_posterior = x;
   first.P_prior = first.P_posterior = P;
   first.transition = StateMatrix::Identity();
+  first.dr_initialized = dr_offset_known;
   log_.steps.push_back(first);
   initialized_ = true;
   initial_stamp_s_ = stamp_s;
+  initial_dr_known_ = dr_offset_known;
   rewind_floor_s_ = -std::numeric_limits<double>::infinity();
+}
+
+bool NavigationFilter::drOffsetKnown() const {
+  return initialized_ && !log_.steps.empty() && log_.steps.back().dr_initialized;
 }
 
 void NavigationFilter::setKeepLog(bool keep) {
@@ -209,6 +232,8 @@ NavigationFilter::Working NavigationFilter::workingFrom(const FilterStep& step, 
     w.consecutive_fix_rejections = step.consecutive_fix_rejections;
     w.consecutive_dr_rejections = step.consecutive_dr_rejections;
     w.dr_initialized = step.dr_initialized;
+  } else {
+    w.dr_initialized = initial_dr_known_;  // a resumed filter knows its dead-reckoning offset from the start
   }
   return w;
 }

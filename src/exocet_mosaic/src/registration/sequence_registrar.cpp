@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
@@ -76,6 +77,12 @@ SequenceStep SequenceRegistrar::add(const cv::Mat& gray_in, double stamp_s) {
   if (!std::isfinite(stamp_s) || stamp_s <= 0.0) {
     std::ostringstream why;
     why << "sequence registrar: image stamp " << stamp_s << " s is not a finite positive time";
+    throw std::invalid_argument(why.str());
+  }
+  if (have_previous_ && stamp_s == previous_stamp_s_) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "sequence registrar: image stamped " << stamp_s
+        << " s like the previous one (a duplicated stamp): skipped";
     throw std::invalid_argument(why.str());
   }
   SequenceStep step;

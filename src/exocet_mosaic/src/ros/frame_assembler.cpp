@@ -25,6 +25,10 @@ bool FrameAssembler::addImage(std::int64_t stamp_ns, std::function<cv::Mat()> de
                               cv::Size image_size, int image_channels) {
   AssembledFrame* frame = slot(stamp_ns, now_s);
   if (!frame) return false;
+  if (frame->decode_image) {
+    ++duplicate_images_;
+    return false;
+  }
   frame->decode_image = std::move(decode_image);
   frame->image_size = image_size;
   frame->image_channels = image_channels;

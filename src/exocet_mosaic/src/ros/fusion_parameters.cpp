@@ -1,6 +1,8 @@
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 
 #include "exocet_common/ros/parameter_reader.h"
@@ -60,8 +62,19 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
 
 }  // namespace
 
+std::string defaultFusionStateFile(const std::string& private_namespace) {
+  std::string node = private_namespace;
+  std::replace(node.begin(), node.end(), '/', '_');
+  const std::string name = "/exocet_fusion_state" + node + ".json";
+  const char* ros_home = std::getenv("ROS_HOME");
+  if (ros_home != nullptr && *ros_home != '\0') return std::string(ros_home) + name;
+  const char* home = std::getenv("HOME");
+  return std::string(home != nullptr ? home : ".") + "/.ros" + name;
+}
+
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   FusionNodeConfig c;
+  c.state_file = defaultFusionStateFile(private_nh.getNamespace());
   const exocet_common::ParameterReader params(private_nh);
   readFilterConfig(ros::NodeHandle(private_nh, "filter"), &c.filter);
 
@@ -164,6 +177,12 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                             "/diagnostics warns above this position 1-sigma (m)");
   params.readPositiveDouble("max_navigation_silence_s", &c.max_navigation_silence_s, 1e6,
                             "/diagnostics warns when no navigation arrived for this long (s)");
+  params.readOptionalString("state_file", &c.state_file,
+                            "file of the last published state, for a restarted fusion to resume from; empty for none");
+  params.readPositiveDouble("state_max_age_s", &c.state_max_age_s, 3600.0,
+                            "a saved state starts the filter when the first input is at most this much later (s)");
+  params.readPositiveDouble("state_save_period_s", &c.state_save_period_s, 60.0,
+                            "wall seconds between two saves of the state");
   return c;
 }
 

@@ -1,6 +1,7 @@
 #include "exocet_mosaic/ros/fusion_ros.h"
 
 #include <cmath>
+#include <filesystem>
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
@@ -9,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
@@ -107,6 +109,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();
   images_only_ = config_.odometry_topic.empty() && config_.nav_fix_topic.empty() && config_.usbl_topic.empty();
   initializeFromParameters();
+  loadSavedState();
   if (config_.view_half_window_s > config_.reorder_delay_s)
     ROS_WARN(
         "fusion: ~view_half_window_s (%.2f s) is longer than ~reorder_delay_s (%.2f s): an image's view is fitted "
@@ -126,7 +129,10 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
            config_.odometry_out_topic.c_str());
 }
 
-FusionRos::~FusionRos() { writeTracks(); }
+FusionRos::~FusionRos() {
+  writeTracks();
+  saveState(true);
+}
 
 // ---------------------------------------------------------------------------------------------------------------
 // Time, resets and bookkeeping.
@@ -137,6 +143,9 @@ bool FusionRos::admitStamp(const ros::Time& stamp, const std::string& what, bool
     rejectInput(what, "zero stamp");
     return false;
   }
+  // A saved state is decided on at the first sensor input (a late fix may be stamped before the state and still
+  // belong to the dive), before anything reaches the filter.
+  if (saved_state_ && what != "fix") maybeResume(t);
   if (have_stamp_ && t < newest_stamp_s_ - config_.clock_jump_s) {
     std::ostringstream why;
     why << what << " stamped " << std::fixed << std::setprecision(3) << newest_stamp_s_ - t
@@ -153,10 +162,15 @@ bool FusionRos::admitStamp(const ros::Time& stamp, const std::string& what, bool
 void FusionRos::resetAll(const std::string& why) {
   ++resets_;
   last_problem_ = "reset: " + why;
+  if (saved_state_) {
+    resume_note_ = "not used: the clock jumped before the first input reached the filter";
+    saved_state_.reset();
+  }
   ROS_WARN_THROTTLE(1.0, "fusion: resetting the filter and the tracks: %s", why.c_str());
   front_end_->reset();
   if (graph_) startGraph();  // the graph of the dive so far ends with the clock it was built on
   have_stamp_ = false;
+  newest_sample_stamps_.clear();
   awaiting_motion_.clear();
   newest_motion_stamp_s_ = -1e300;
   for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->poses.clear();
@@ -167,7 +181,25 @@ void FusionRos::resetAll(const std::string& why) {
 void FusionRos::rejectInput(const std::string& kind, const std::string& why) {
   ++rejected_inputs_[kind];
   last_problem_ = kind + " rejected: " + why;
-  ROS_ERROR_THROTTLE(2.0, "fusion: %s rejected: %s", kind.c_str(), why.c_str());
+  // Throttled per kind of input: a bad attitude stream must not hide bad fixes.
+  std::uint64_t held_back = 0;
+  if (rejection_log_.allow(kind, &held_back))
+    ROS_ERROR("fusion: %s rejected: %s%s", kind.c_str(), why.c_str(), rejection_log_.heldBackNote(held_back).c_str());
+}
+
+bool FusionRos::inStreamOrder(const std::string& kind, const ros::Time& stamp) {
+  // Samples are interpolated between their neighbours: one stamped at or before the newest (sent twice, or going
+  // back) is left out rather than allowed to reorder the history.
+  const auto newest = newest_sample_stamps_.find(kind);
+  if (newest != newest_sample_stamps_.end() && stamp <= newest->second) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "stamped " << (newest->second - stamp).toSec()
+        << " s before or at the previous sample's (a duplicated or backward stamp): out of order";
+    rejectInput(kind, why.str());
+    return false;
+  }
+  newest_sample_stamps_[kind] = stamp;
+  return true;
 }
 
 void FusionRos::countResult(const std::string& kind, const fu::UpdateResult& result) {
@@ -234,6 +266,7 @@ std::optional<Eigen::Isometry3d> FusionRos::mountOf(const std::string& frame) {
 // Initialisation.
 
 void FusionRos::onStarted(const std::string& source) {
+  started_from_ = source;
   const fu::FilterState s = front_end_->filter().current();
   ensureMapOrigin(s.position_en_m);
   ROS_INFO("fusion: initialised from %s at E %.2f N %.2f (1-sigma %.2f m)", source.c_str(), s.position_en_m.x(),
@@ -270,6 +303,104 @@ void FusionRos::startInLocalFrame() {
   // The images carry a heading on but need one to start from: the local frame's y axis if none is given.
   if (!front_end_->operatorHeading()) front_end_->setOperatorHeading(enuYawFromHeading_rad(0.0));
   front_end_->setOperatorStart(Eigen::Vector2d::Zero(), config_.initial_sigma_m);
+}
+
+void FusionRos::loadSavedState() {
+  if (config_.state_file.empty()) return;
+  std::error_code error;
+  if (!std::filesystem::exists(config_.state_file, error)) {
+    resume_note_ = "none saved";
+    return;
+  }
+  const auto json = exocet_common::readJsonObjectFile<nlohmann::json>(config_.state_file);
+  try {
+    if (!json) throw std::invalid_argument("not a JSON object");
+    saved_state_ = fu::savedFusionStateFromJson(*json);
+  } catch (const std::exception& e) {
+    resume_note_ = std::string("unreadable: ") + e.what();
+    ROS_WARN("fusion: the state file %s cannot be read (%s): the filter starts afresh", config_.state_file.c_str(),
+             e.what());
+    return;
+  }
+  resume_note_ = "waiting for the first input";
+  ROS_INFO(
+      "fusion: %s holds a state saved at %.3f s: the filter resumes from it if the first input comes within %.0f s "
+      "after it",
+      config_.state_file.c_str(), saved_state_->stamp_s, config_.state_max_age_s);
+}
+
+void FusionRos::maybeResume(double first_stamp_s) {
+  const fu::SavedFusionState saved = *saved_state_;
+  saved_state_.reset();
+  if (front_end_->filter().initialized()) {
+    resume_note_ = "not used: the filter was started otherwise (" + started_from_ + ")";
+    return;
+  }
+  std::string why = fu::resumeRefusal(saved.stamp_s, first_stamp_s, config_.state_max_age_s);
+  const bool saved_in_utm = saved.frame == config_.utm_frame;
+  if (why.empty() && saved_in_utm && saved.utm_zone > 0 && grid_ &&
+      (grid_->zone() != saved.utm_zone || grid_->northern() != saved.northern_hemisphere))
+    why = "it was saved in UTM zone " + std::to_string(saved.utm_zone) + ", the dive is in " + grid_->name();
+  if (why.empty() && saved.frame != world_frame_ && (local_world_ || grid_ || saved_in_utm))
+    why = "it was saved in the frame '" + saved.frame + "', the dive is in '" + world_frame_ + "'";
+  if (!why.empty()) {
+    resume_note_ = "not used: " + why;
+    ROS_WARN("fusion: the state saved in %s is not used: %s; the filter starts afresh", config_.state_file.c_str(),
+             why.c_str());
+    return;
+  }
+  try {
+    front_end_->resume(saved.stamp_s, saved.x, saved.P, saved.dr_offset_known);
+  } catch (const std::invalid_argument& e) {
+    resume_note_ = std::string("not used: ") + e.what();
+    ROS_WARN("fusion: the state saved in %s is not used: %s", config_.state_file.c_str(), e.what());
+    return;
+  }
+  if (!saved_in_utm && !local_world_) {
+    world_frame_ = saved.frame;
+    local_world_ = true;
+  }
+  if (saved_in_utm && !grid_ && saved.utm_zone > 0) {
+    grid_ = exocet_common::UtmGrid::fromZone(saved.utm_zone, saved.northern_hemisphere);
+    grid_source_ = "the saved state";
+  }
+  if (saved.operator_heading_rad) front_end_->setOperatorHeading(*saved.operator_heading_rad);
+  if (saved.map_origin_en_m && !map_origin_en_m_) setMapOrigin(*saved.map_origin_en_m);
+  std::ostringstream source;
+  source << std::fixed << std::setprecision(1) << "the state saved " << first_stamp_s - saved.stamp_s
+         << " s before the first input (a restart)";
+  resume_note_ = "resumed from it";
+  onStarted(source.str());
+}
+
+void FusionRos::saveState(bool now) {
+  if (config_.state_file.empty() || !front_end_->filter().initialized()) return;
+  const ros::SteadyTime wall = ros::SteadyTime::now();
+  if (!now && state_saves_ + state_save_failures_ > 0 &&
+      (wall - last_state_save_).toSec() < config_.state_save_period_s)
+    return;
+  last_state_save_ = wall;
+  const fu::FilterState current = front_end_->filter().current();
+  fu::SavedFusionState state;
+  state.stamp_s = current.stamp_s;
+  state.x = current.x;
+  state.P = current.P;
+  state.dr_offset_known = front_end_->filter().drOffsetKnown();
+  state.frame = world_frame_;
+  if (grid_ && !local_world_) {
+    state.utm_zone = grid_->zone();
+    state.northern_hemisphere = grid_->northern();
+  }
+  state.map_origin_en_m = map_origin_en_m_;
+  state.operator_heading_rad = front_end_->operatorHeading();
+  try {
+    exocet_common::writeJsonFileAtomically(config_.state_file, fu::savedFusionStateToJson(state));
+    ++state_saves_;
+  } catch (const std::exception& e) {
+    ++state_save_failures_;
+    last_problem_ = std::string("state not saved: ") + e.what();
+    ROS_WARN_THROTTLE(30.0, "fusion: the state is not saved (a restart would start blind): %s", e.what());
+  }
 }
 
 bool FusionRos::onSetInitialPose(exocet_msgs::SetInitialPose::Request& request,
@@ -364,7 +495,7 @@ void FusionRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
     rejectInput("imu", "no valid orientation (NaN, not a unit quaternion, or orientation_covariance[0] = -1)");
     return;
   }
-  if (!admitStamp(msg->header.stamp, "imu", false)) return;
+  if (!admitStamp(msg->header.stamp, "imu", false) || !inStreamOrder("imu", msg->header.stamp)) return;
   front_end_->addImuAttitude(msg->header.stamp.toSec(), toEigen(msg->orientation));
 }
 
@@ -381,6 +512,7 @@ void FusionRos::onAltitude(const sensor_msgs::RangeConstPtr& msg) {
     rejectInput("altitude", "empty frame_id: the altimeter's mount on the vehicle is unknown");
     return;
   }
+  if (!inStreamOrder("altitude", msg->header.stamp)) return;
   front_end_->addAltimeterRange(msg->header.stamp.toSec(), r, msg->header.frame_id);
 }
 
@@ -390,6 +522,7 @@ void FusionRos::onDepth(const exocet_msgs::DepthConstPtr& msg) {
     return;
   }
   if (!admitStamp(msg->header.stamp, "depth", false)) return;
+  if (!inStreamOrder("depth", msg->header.stamp)) return;
   front_end_->addDepth(msg->header.stamp.toSec(), msg->depth_m);
 }
 
@@ -624,8 +757,12 @@ void FusionRos::ensureMapOrigin(const Eigen::Vector2d& en_m) {
   if (map_origin_en_m_) return;
   const double g = config_.map_origin_grid_m;
   // A local frame keeps its own origin: rviz's single precision is not at stake there.
-  map_origin_en_m_ = local_world_ ? Eigen::Vector2d::Zero()
-                                  : Eigen::Vector2d(std::round(en_m.x() / g) * g, std::round(en_m.y() / g) * g);
+  setMapOrigin(local_world_ ? Eigen::Vector2d::Zero()
+                            : Eigen::Vector2d(std::round(en_m.x() / g) * g, std::round(en_m.y() / g) * g));
+}
+
+void FusionRos::setMapOrigin(const Eigen::Vector2d& origin_en_m) {
+  map_origin_en_m_ = origin_en_m;
   if (!config_.publish_tf || config_.map_frame == world_frame_) return;
   geometry_msgs::TransformStamped t;
   t.header.stamp = ros::Time::now();
@@ -723,6 +860,7 @@ void FusionRos::publishState(const ros::Time& stamp) {
     t.transform.rotation = odometry.pose.pose.orientation;
     tf_broadcaster_.sendTransform(t);
   }
+  saveState(false);
 }
 
 void FusionRos::publishDatum() {
@@ -1062,6 +1200,12 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
         std::make_pair("invalid", &invalid_), std::make_pair("rejected inputs", &rejected_inputs_)})
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
+  status.add("started from", started_from_.empty() ? std::string("not started") : started_from_);
+  if (!config_.state_file.empty()) {
+    status.add("saved state", resume_note_);
+    status.add("state saves", state_saves_);
+    status.add("state save failures", state_save_failures_);
+  }
   status.add("last problem", last_problem_);
   if (!front_end_->filter().initialized()) {
     status.summary(DiagnosticStatus::WARN,

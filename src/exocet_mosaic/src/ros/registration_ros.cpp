@@ -133,7 +133,10 @@ void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
 void RegistrationRos::reject(const std::string& why) {
   ++rejected_;
   last_problem_ = why;
-  ROS_ERROR_THROTTLE(5.0, "registration: skipping an image: %s", why.c_str());
+  // Throttled per kind of problem (the text's start): undecodable images must not hide repeated stamps.
+  std::uint64_t held_back = 0;
+  if (reject_log_.allow(why.substr(0, 32), &held_back))
+    ROS_ERROR("registration: skipping an image: %s%s", why.c_str(), reject_log_.heldBackNote(held_back).c_str());
 }
 
 void RegistrationRos::onReconfigure(exocet_mosaic::RegistrationConfig& c, uint32_t) {

@@ -99,6 +99,10 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
                "flush and shut down after this many wall seconds without input, 0: never");
   p.readInt("max_failed_tiles_kept", &c.max_failed_tiles_kept, 0, 100, "closed mosaics kept for a write retry");
   p.readPositiveDouble("retry_period_s", &c.retry_period_s, 3600.0, "period of write retries (s)");
+  p.readPositiveDouble("resume_max_gap_s", &c.resume_max_gap_s, 1e6,
+                       "an interrupted run is carried on when the first image comes at most this much after it (s)");
+  p.readPositiveDouble("progress_period_s", &c.progress_period_s, 60.0,
+                       "wall seconds between two saves of the run's progress");
   p.readOptionalString("graph_corrections_topic", &c.graph_corrections_topic,
                        "pose graph corrections to follow (exocet_msgs/PositionCorrections), empty: none");
   p.readDouble("rerender_threshold_gsd", &c.rerender_threshold_gsd, 0.05, 1000.0,

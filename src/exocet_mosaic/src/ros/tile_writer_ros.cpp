@@ -13,6 +13,7 @@
 #include <exocet_msgs/Tile.h>
 #include <visualization_msgs/MarkerArray.h>
 #include <Eigen/Eigenvalues>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
@@ -62,8 +63,14 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     std::filesystem::create_directories(images_dir_, error);
     if (error) ROS_ERROR("tile writer: cannot create %s: %s", images_dir_.c_str(), error.message().c_str());
   }
-  const int stale = writer_->removeStaleTemporaries();
+  const int stale =
+      writer_->removeStaleTemporaries() + (images_dir_.empty() ? 0 : tiles::removeTemporariesIn(images_dir_));
   if (stale > 0) ROS_WARN("tile writer: removed %d partial file(s) left by an interrupted run", stale);
+  const int incomplete = writer_->removeIncompleteTiles();
+  if (incomplete > 0)
+    ROS_WARN("tile writer: removed %d file(s) of a tile whose GeoTIFF an interrupted run had not renamed yet",
+             incomplete);
+  loadPreviousRun();
   if (!config_.udp_host.empty())
     notifier_ = std::make_unique<tiles::TileNotifier>(config_.udp_host, config_.udp_port, config_.udp_bind_address);
   if (config_.utm_zone > 0) {
@@ -154,7 +161,17 @@ TileWriterRos::~TileWriterRos() {
   write_cv_.notify_all();
   if (writer_thread_.joinable()) writer_thread_.join();
   updateMosaicVrt(true);
+  if (!run_decided_) {
+    if (previous_run_ && previous_run_->finished) {
+      // No image came (a writer respawned after the replay's end): the summary and progress are the last run's.
+      ROS_INFO("tile writer: no image received: %s stays as the last run left it", config_.files.output_dir.c_str());
+      return;
+    }
+    if (previous_run_) continueRun(*previous_run_, false);  // the interrupted run ends here: its counts
+    run_decided_ = true;
+  }
   writeRunSummary();
+  saveProgress(true);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -174,7 +191,10 @@ bool TileWriterRos::acceptTransport(const std::string& transport) {
 void TileWriterRos::reject(const std::string& why) {
   ++rejected_;
   last_problem_ = why;
-  ROS_ERROR_THROTTLE(5.0, "tile writer: %s", why.c_str());
+  // Throttled per kind of problem (the text's start): a frequent one must not hide another.
+  std::uint64_t held_back = 0;
+  if (reject_log_.allow(why.substr(0, 32), &held_back))
+    ROS_ERROR("tile writer: %s%s", why.c_str(), reject_log_.heldBackNote(held_back).c_str());
 }
 
 void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
@@ -227,22 +247,26 @@ void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv
     return;
   }
   const std::int64_t stamp_ns = static_cast<std::int64_t>(header.stamp.toNSec());
+  if (!run_decided_) decideRun(header.stamp.toSec());
+  newest_image_stamp_s_ = std::max(newest_image_stamp_s_.load(), header.stamp.toSec());
   checkClock(stamp_ns);
-  addAndProcess([&](double now_s) {
-    return assembler_.addImage(stamp_ns, std::move(decode), now_s, image_size, image_channels);
-  });
+  if (!addAndProcess([&](double now_s) {
+        return assembler_.addImage(stamp_ns, std::move(decode), now_s, image_size, image_channels);
+      }))
+    reject("image stamped like one already received (a duplicated stamp) or older than the frames composed: ignored");
 }
 
-void TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
+bool TileWriterRos::addAndProcess(const std::function<bool(double now_s)>& add) {
   // One part in, then every frame it completes (or that waited too long) out, in stamp order.
   std::vector<AssembledFrame> ready;
   {
     std::lock_guard<std::mutex> lock(compose_mutex_);
     const double now_s = last_input_wall_.toSec();
-    if (!add(now_s)) return;
+    if (!add(now_s)) return false;
     ready = assembler_.popReady(now_s);
   }
   processReady(std::move(ready));
+  return true;
 }
 
 void TileWriterRos::onMotion(const exocet_msgs::ImageMotionConstPtr& msg) {
@@ -426,6 +450,16 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
       k = frame.motion->camera_matrix;
       have_k = true;
     } else if (camera_info_ && camera_info_->K[0] > 0.0) {
+      const cv::Size calibrated(static_cast<int>(camera_info_->width), static_cast<int>(camera_info_->height));
+      const cv::Size size = !frame.image_size.empty() ? frame.image_size
+                            : !input.image.empty()    ? input.image.size()
+                                                      : calibrated;
+      if (!calibrated.empty() && size != calibrated) {
+        reject("image of " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+               " px, not the camera_info's " + std::to_string(calibrated.width) + "x" +
+               std::to_string(calibrated.height) + " px, and no camera matrix for it in its motion: not composed");
+        return;
+      }
       k = matrixFrom(camera_info_->K);
       have_k = true;
     }
@@ -525,6 +559,12 @@ void TileWriterRos::onTimer() {
     ready = assembler_.popReady(ros::WallTime::now().toSec());
   }
   processReady(std::move(ready));
+  if (run_decided_ && images_ != progress_images_ &&
+      (ros::WallTime::now() - last_progress_wall_).toSec() >= config_.progress_period_s) {
+    last_progress_wall_ = ros::WallTime::now();
+    progress_images_ = images_;
+    saveProgress(false);
+  }
   if (config_.preview_period_s > 0.0 &&
       (ros::WallTime::now() - last_preview_wall_).toSec() >= config_.preview_period_s) {
     last_preview_wall_ = ros::WallTime::now();
@@ -668,6 +708,7 @@ void TileWriterRos::writerLoop() {
       continue;
     }
     ++tiles_written_;
+    newest_frame_on_disk_ = std::max(newest_frame_on_disk_, pending.mosaic.last_frame);
     if (record) {
       tiles_changed_since_adjustment_ = true;
       images_kept_ += static_cast<std::int64_t>(record->images.size());
@@ -682,6 +723,7 @@ void TileWriterRos::writerLoop() {
     vrt_stale_ = true;
     lock.unlock();
     updateMosaicVrt(false);
+    saveProgress(false);  // what a crash from now on would lose
     lock.lock();
     write_cv_.notify_all();
   }
@@ -871,6 +913,7 @@ void TileWriterRos::rerenderLoop() {
                           [this]() { return stop_rerender_; });
     if (stop_rerender_) break;
     lock.unlock();
+    loadKeptImageLevels();
     rerenderDue();
     if (!config_.graph_corrections_topic.empty() && config_.tile_adjustment_period_s > 0.0 &&
         (ros::WallTime::now() - last_adjustment).toSec() >= config_.tile_adjustment_period_s) {
@@ -1195,7 +1238,7 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(DiagnosticStatus::ERROR, "tiles waiting for a retry: " + write_error);
   else if (!utm_zone_ && local_frame_.empty())
     status.summary(DiagnosticStatus::WARN, "no UTM zone yet (/mosaic/datum or ~utm_zone)");
-  else if (images_ > 0 && stats.frames_composed == 0)
+  else if (images_.load() > 0 && stats.frames_composed == 0)
     status.summary(DiagnosticStatus::WARN, "images arrive but none is composed: " + stats.last_problem);
   else
     status.summary(DiagnosticStatus::OK, "composing");
@@ -1203,7 +1246,8 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     std::lock_guard<std::mutex> lock(write_mutex_);
     status.add("frame of the tiles", local_frame_.empty() ? "UTM" : "local frame '" + local_frame_ + "'");
   }
-  status.add("images received", images_);
+  status.add("run", run_note_.empty() ? std::string("waiting for the first image") : run_note_);
+  status.add("images received", images_.load());
   status.add("images rejected", rejected_);
   status.add("frames composed", stats.frames_composed);
   status.add("frames skipped (no pose)", stats.frames_skipped_no_pose);
@@ -1212,12 +1256,24 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("navigation jumps", stats.navigation_jumps);
   status.add("frames waiting for motion/pose", pending);
   status.add("frames released incomplete (timeout)", assembler_.timedOut());
+  status.add("late or repeated parts ignored", assembler_.lateParts() + assembler_.duplicateImages());
   status.add("clock jumps", clock_jumps_);
   status.add("open mosaic images", stats.open_frames);
   status.add("open mosaic extent (m)", stats.open_extent_m);
   status.add("open mosaic memory (MB)", static_cast<double>(stats.open_memory_bytes) / 1e6);
   status.add("lighting field ready", stats.lighting_ready);
   status.add("tiles written", written);
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    status.add("frames not on disk yet", framesNotOnDiskLocked(next_frame_index_ + static_cast<int>(pending)));
+    status.addf("newest image stamp (s)", "%.3f", newest_image_stamp_s_.load());
+    if (run_base_.restarts > 0) {
+      status.add("tiles written (run)", run_base_.tiles_written + tiles_written_);
+      status.add("restarts (run)", run_base_.restarts);
+      status.add("frames lost at the last restart", frames_lost_at_restart_);
+      status.add("frames lost (run)", run_base_.frames_lost);
+    }
+  }
   status.add("tiles queued", queued);
   status.add("tiles waiting for a retry", failed);
   status.add("write failures", write_failures);
@@ -1263,6 +1319,182 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
 }
 
 // ---------------------------------------------------------------------------------------------------------------
+// A run carried over restarts.
+
+void TileWriterRos::loadPreviousRun() {
+  const std::string path = tiles::tileWriterProgressPath(config_.files.output_dir, config_.files.prefix);
+  std::error_code error;
+  if (!std::filesystem::exists(path, error)) return;
+  try {
+    const auto json = exocet_common::readJsonObjectFile<nlohmann::json>(path);
+    if (!json) throw std::invalid_argument("not a JSON object");
+    previous_run_ = tiles::tileWriterProgressFromJson(*json);
+  } catch (const std::exception& e) {
+    ROS_WARN("tile writer: %s cannot be read (%s): this instance starts a new run", path.c_str(), e.what());
+    return;
+  }
+  if (config_.keep_images) {
+    kept_tiles_ = tiles::loadKeptTiles(images_dir_, *writer_);
+    for (const std::string& problem : kept_tiles_.problems)
+      ROS_WARN("tile writer: record left out: %s", problem.c_str());
+    if (kept_tiles_.versions_removed > 0)
+      ROS_WARN("tile writer: removed %d older tile version(s) an interrupted redraw had left",
+               kept_tiles_.versions_removed);
+  }
+  ROS_INFO(
+      "tile writer: %s holds a run that %s (%lld tiles, newest image at %.3f s): carried on if the first image comes "
+      "within %.0f s after it",
+      config_.files.output_dir.c_str(), previous_run_->finished ? "ended normally" : "was interrupted",
+      static_cast<long long>(previous_run_->tiles_written), previous_run_->newest_stamp_s, config_.resume_max_gap_s);
+}
+
+void TileWriterRos::decideRun(double first_stamp_s) {
+  if (previous_run_) {
+    const std::string why = tiles::continuationRefusal(*previous_run_, first_stamp_s, config_.resume_max_gap_s);
+    if (why.empty()) {
+      continueRun(*previous_run_, true);
+    } else {
+      run_note_ = "a new run: the one in the folder is not carried on (" + why + ")";
+      ROS_WARN("tile writer: %s; its tiles stay as they are", run_note_.c_str());
+    }
+  } else {
+    run_note_ = "a new run";
+  }
+  kept_tiles_ = tiles::KeptTiles();
+  run_decided_ = true;
+}
+
+void TileWriterRos::continueRun(const tiles::TileWriterProgress& previous, bool adopt_tiles) {
+  next_frame_index_ = previous.next_frame;
+  std::size_t adopted = 0;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    frames_lost_at_restart_ = previous.frames_not_on_disk;
+    run_base_ = previous;
+    run_base_.frames_lost += previous.frames_not_on_disk;
+    run_base_.restarts += 1;
+    run_base_.finished = false;
+    newest_frame_on_disk_ = previous.next_frame - 1;
+    if (adopt_tiles) {
+      for (tiles::TileRecord& record : kept_tiles_.records) {
+        images_kept_ += static_cast<std::int64_t>(record.images.size());
+        records_[record.index] = std::move(record);
+        ++adopted;
+      }
+      if (adopted > 0) tiles_changed_since_adjustment_ = true;
+    }
+  }
+  if (adopt_tiles && config_.image_gain_compensation) {
+    std::vector<std::string> files;
+    {
+      std::lock_guard<std::mutex> lock(write_mutex_);
+      for (const auto& [index, record] : records_)
+        for (const tiles::RecordedImage& image : record.images) files.push_back(image.file);
+    }
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    levels_to_load_.insert(levels_to_load_.end(), files.begin(), files.end());
+  }
+  if (adopt_tiles && !config_.graph_corrections_topic.empty()) {
+    const std::string path = images_dir_ + "/graph_corrections.csv";
+    std::error_code error;
+    if (std::filesystem::exists(path, error)) {
+      try {
+        int left_out = 0;
+        tiles::PositionCorrectionTrack track = tiles::readPositionCorrections(path, &left_out);
+        std::lock_guard<std::mutex> lock(corrections_mutex_);
+        if (corrections_.empty()) corrections_ = std::move(track);
+      } catch (const std::exception& e) {
+        ROS_WARN("tile writer: the saved graph corrections are not read back: %s", e.what());
+      }
+    }
+  }
+  rerender_cv_.notify_all();
+  char note[256];
+  std::snprintf(note, sizeof(note),
+                "carried on after a restart (restart %d of the run; the previous instance %s): %zu written tiles' "
+                "records read back, %d frames it held were lost",
+                previous.restarts + 1, previous.finished ? "ended normally" : "was interrupted", adopted,
+                previous.frames_not_on_disk);
+  run_note_ = note;
+  ROS_WARN("tile writer: %s (%s)", run_note_.c_str(), config_.files.output_dir.c_str());
+}
+
+int TileWriterRos::framesNotOnDiskLocked(int next_frame) const {
+  int held = next_frame - 1 - newest_frame_on_disk_;
+  // Closed mosaics older than the newest tile on disk that are still waiting for a write (a full disk).
+  for (const std::deque<PendingTile>* tiles : {&write_queue_, &failed_tiles_})
+    for (const PendingTile& tile : *tiles)
+      if (!tile.revision && tile.mosaic.last_frame <= newest_frame_on_disk_)
+        held += tile.mosaic.last_frame - tile.mosaic.first_frame;
+  return std::max(0, held);
+}
+
+void TileWriterRos::saveProgress(bool finished) {
+  if (!run_decided_) return;
+  std::lock_guard<std::mutex> progress_lock(progress_mutex_);
+  tiles::TileWriterProgress progress;
+  std::int64_t composed = 0;
+  int pending = 0;
+  {
+    std::lock_guard<std::mutex> lock(compose_mutex_);
+    pending = static_cast<int>(assembler_.pendingImages());
+    composed = composer_.stats().frames_composed;
+  }
+  progress.next_frame = next_frame_index_ + pending;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    progress.frames_not_on_disk = framesNotOnDiskLocked(progress.next_frame);
+    progress.tiles_written = run_base_.tiles_written + tiles_written_;
+    progress.images_received = run_base_.images_received + images_;
+    progress.frames_composed = run_base_.frames_composed + composed;
+    progress.frames_lost = run_base_.frames_lost;
+    progress.restarts = run_base_.restarts;
+  }
+  progress.newest_stamp_s = newest_image_stamp_s_;
+  progress.finished = finished;
+  try {
+    exocet_common::writeJsonFileAtomically(
+        tiles::tileWriterProgressPath(config_.files.output_dir, config_.files.prefix),
+        tiles::tileWriterProgressToJson(progress));
+  } catch (const std::exception& e) {
+    ++progress_failures_;
+    last_progress_error_ = e.what();
+    ROS_WARN_THROTTLE(30.0, "tile writer: the run's progress is not saved (a restart could not carry it on): %s",
+                      e.what());
+  }
+}
+
+void TileWriterRos::loadKeptImageLevels() {
+  std::vector<std::string> files;
+  {
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    files.swap(levels_to_load_);
+  }
+  if (files.empty()) return;
+  const compose::ImageGainsConfig& g = image_gains_.config();
+  int loaded = 0, missing = 0;
+  for (const std::string& file : files) {
+    {
+      std::lock_guard<std::mutex> lock(image_gains_mutex_);
+      if (image_gains_.contains(file)) continue;  // consecutive tiles share an image
+    }
+    const cv::Mat image = cv::imread(images_dir_ + "/" + file, cv::IMREAD_UNCHANGED);
+    if (image.empty()) {
+      ++missing;
+      continue;
+    }
+    compose::ImageLevels levels = compose::imageLevels(image, g.grid_columns, g.grid_rows);
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    if (image_gains_.add(file, std::move(levels))) {
+      ++image_levels_added_;
+      ++loaded;
+    }
+  }
+  ROS_INFO("tile writer: the gains of %d kept image(s) of the run read back%s", loaded,
+           missing > 0 ? (" (" + std::to_string(missing) + " unreadable)").c_str() : "");
+}
+
+// ---------------------------------------------------------------------------------------------------------------
 // End of the run.
 
 std::string TileWriterRos::noTileReason() {
@@ -1272,10 +1504,10 @@ std::string TileWriterRos::noTileReason() {
     stats = composer_.stats();
   }
   std::lock_guard<std::mutex> lock(write_mutex_);
-  if (tiles_written_ > 0) return "";
-  if (images_ == 0) return "no image arrived on " + config_.image_topic;
+  if (tiles_written_ + run_base_.tiles_written > 0) return "";
+  if (images_ + run_base_.images_received == 0) return "no image arrived on " + config_.image_topic;
   if (stats.frames_composed == 0) {
-    std::string why = std::to_string(images_) + " images received, none composed: ";
+    std::string why = std::to_string(images_.load()) + " images received, none composed: ";
     const std::string problem = !stats.last_problem.empty() ? stats.last_problem : last_problem_;
     if (poses_ == 0)
       why += "no fused pose arrived from the fusion (" + config_.odometry_topic +
@@ -1298,20 +1530,24 @@ std::string TileWriterRos::noTileReason() {
 void TileWriterRos::writeRunSummary() {
   const std::string reason = noTileReason();
   nlohmann::ordered_json summary;
+  tiles::TileWriterProgress base;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
-    summary["tiles_written"] = tiles_written_;
+    base = run_base_;
+    summary["tiles_written"] = base.tiles_written + tiles_written_;
     summary["tiles_not_written"] = static_cast<std::int64_t>(failed_tiles_.size()) + tiles_dropped_;
     summary["frame"] = local_frame_.empty() ? "utm" : local_frame_;
     summary["epsg"] = local_frame_.empty() && utm_zone_ ? tiles::epsgForUtm(*utm_zone_, northern_) : 0;
   }
-  summary["images_received"] = images_;
+  summary["images_received"] = base.images_received + images_;
   summary["poses_received"] = poses_;
   summary["camera_heights_received"] = camera_heights_;
   {
     std::lock_guard<std::mutex> lock(compose_mutex_);
-    summary["frames_composed"] = composer_.stats().frames_composed;
+    summary["frames_composed"] = base.frames_composed + composer_.stats().frames_composed;
   }
+  summary["restarts"] = base.restarts;
+  summary["frames_lost"] = base.frames_lost;
   summary["reason"] = reason.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(reason);
   if (!reason.empty()) ROS_ERROR("tile writer: no tile written: %s", reason.c_str());
   const std::string path = config_.files.output_dir + "/run_summary.json";

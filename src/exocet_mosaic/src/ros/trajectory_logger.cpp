@@ -125,6 +125,9 @@ TrajectoryLoggerConfig readTrajectoryLoggerConfig(const ros::NodeHandle& private
   params.readTopic("usbl_topic", &config.usbl_topic);
   params.readTopic("datum_topic", &config.datum_topic);
   params.readString("utm_frame", &config.utm_frame, {}, "the UTM frame of the odometry, normally 'utm'");
+  params.readPositiveDouble("resume_max_gap_s", &config.resume_max_gap_s, 1e6,
+                            "the newest files are appended to when the first message comes at most this long after "
+                            "their last row (s)");
   return config;
 }
 
@@ -152,6 +155,37 @@ class TrajectoryLogger::CsvFile {
       std::remove(path_.c_str());
       throw std::runtime_error("cannot write '" + path_ + "': " + last_error_);
     }
+  }
+
+  struct Append {};
+  /// Opens an existing `path` for appending (a restart): a partial last line is cut off; `*last_row` receives the
+  /// last whole row (empty if the file holds only its header).
+  CsvFile(std::string path, Append, std::string* last_row) : path_(std::move(path)) {
+    fd_ = ::open(path_.c_str(), O_RDWR | O_APPEND | O_CLOEXEC);
+    if (fd_ < 0) throw std::system_error(errno, std::generic_category(), "cannot open '" + path_ + "'");
+    std::string text;
+    char chunk[65536];
+    ssize_t n = 0;
+    while ((n = ::pread(fd_, chunk, sizeof(chunk), static_cast<off_t>(text.size()))) > 0)
+      text.append(chunk, static_cast<size_t>(n));
+    const size_t whole = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
+    if (whole < text.size() && ::ftruncate(fd_, static_cast<off_t>(whole)) != 0) {
+      const int error = errno;
+      ::close(fd_);
+      throw std::system_error(error, std::generic_category(), "cannot cut the partial last row of '" + path_ + "'");
+    }
+    text.resize(whole);
+    if (text.empty()) {
+      ::close(fd_);
+      throw std::runtime_error("'" + path_ + "' has no header line");
+    }
+    const size_t header_end = text.find('\n');
+    const size_t last_start = text.rfind('\n', text.size() - 2);
+    *last_row = last_start == std::string::npos || last_start < header_end
+                    ? std::string()
+                    : text.substr(last_start + 1, text.size() - last_start - 2);
+    bytes_on_disk_ = whole;
+    lines_on_disk_ = 1;  // this run's rows are counted from here, as after the header of a new file
   }
 
   ~CsvFile() { close(); }
@@ -273,12 +307,13 @@ TrajectoryLogger::TrajectoryLogger(ros::NodeHandle nh, ros::NodeHandle private_n
   output_dir_abs_ = fs::absolute(config_.output_dir, error).lexically_normal().string();
   if (error) output_dir_abs_ = config_.output_dir;
   try {
-    current_set_ = openFileSet(1);
+    current_set_ = reopenNewestFileSet();
+    if (!current_set_) current_set_ = openFileSet(1);
   } catch (const std::exception& e) {
     throw std::runtime_error(exocet_common::ParameterReader(private_nh_).describe("output_dir") + " '" +
                              output_dir_abs_ + "' is not writable: " + e.what());
   }
-  if (current_set_->index > 1)
+  if (current_set_->index > 1 && !reopened_pending_)
     ROS_WARN(
         "%s already holds trajectory files of an earlier run: writing this run's with the suffix '%s' "
         "(nothing is overwritten)",
@@ -422,6 +457,7 @@ void TrajectoryLogger::checkClock() {
 }
 
 TrajectoryLogger::FileSet* TrajectoryLogger::placeInTime(Stream* stream, const ros::Time& stamp, bool reorder_ok) {
+  if (reopened_pending_) decideOnReopenedSet(stamp);
   if (stream->last_stamp.isZero()) {
     stream->generation = generation_;
     stream->last_stamp = stamp;
@@ -491,6 +527,90 @@ std::unique_ptr<TrajectoryLogger::FileSet> TrajectoryLogger::openFileSet(int fir
     return set;
   }
   throw std::runtime_error("more than " + std::to_string(kMaxSets) + " sets of trajectory files in " + output_dir_abs_);
+}
+
+std::unique_ptr<TrajectoryLogger::FileSet> TrajectoryLogger::reopenNewestFileSet() {
+  int newest = 0;
+  for (int index = 1; index < 10000; ++index) {
+    std::error_code error;
+    if (!fs::exists(output_dir_abs_ + "/ground_truth" + suffixFor(index) + ".csv", error)) break;
+    newest = index;
+  }
+  if (newest == 0) return nullptr;
+  const std::string suffix = suffixFor(newest);
+  const std::string base = output_dir_abs_ + "/";
+  auto set = std::make_unique<FileSet>();
+  set->index = newest;
+  set->datum_path = base + "datum" + suffix + ".json";
+  std::string last_rows[3];
+  try {
+    set->ground_truth =
+        std::make_unique<CsvFile>(base + "ground_truth" + suffix + ".csv", CsvFile::Append(), &last_rows[0]);
+    set->navigation =
+        std::make_unique<CsvFile>(base + "navigation" + suffix + ".csv", CsvFile::Append(), &last_rows[1]);
+    set->usbl = std::make_unique<CsvFile>(base + "usbl_fixes" + suffix + ".csv", CsvFile::Append(), &last_rows[2]);
+  } catch (const std::exception& e) {
+    ROS_WARN("the newest trajectory files in %s cannot be appended to (%s): a new set is started",
+             output_dir_abs_.c_str(), e.what());
+    return nullptr;
+  }
+  for (const std::string& row : last_rows) {
+    // stamp_s, first on each row, printed as sec.nanosec
+    const std::string text = row.substr(0, row.find(','));
+    const size_t dot = text.find('.');
+    if (text.empty() || dot == std::string::npos) continue;
+    try {
+      const ros::Time stamp(static_cast<uint32_t>(std::stoul(text.substr(0, dot))),
+                            static_cast<uint32_t>(std::stoul(text.substr(dot + 1))));
+      if (stamp > reopened_last_stamp_) reopened_last_stamp_ = stamp;
+    } catch (const std::exception&) {
+      // A row that does not start with a stamp: no timeline to continue from it.
+    }
+  }
+  reopened_pending_ = true;
+  return set;
+}
+
+void TrajectoryLogger::decideOnReopenedSet(const ros::Time& stamp) {
+  reopened_pending_ = false;
+  std::string why;
+  if (!reopened_last_stamp_.isZero()) {
+    const double gap_s = stamp.toSec() - reopened_last_stamp_.toSec();
+    if (gap_s < -kStampJumpThreshold_s)
+      why = "the first message is stamped " + formatNumber(-gap_s) + " s before their last row (a bag played again)";
+    else if (gap_s > config_.resume_max_gap_s)
+      why = "the first message is stamped " + formatNumber(gap_s) +
+            " s after their last row, more than "
+            "~resume_max_gap_s = " +
+            formatNumber(config_.resume_max_gap_s) + " s (another dive)";
+  }
+  if (why.empty()) {
+    if (have_datum_) writeDatumFile(current_set_.get());
+    resume_note_ = "appending to the set '" + suffixFor(current_set_->index) + "' left by a run interrupted at " +
+                   formatStamp(reopened_last_stamp_);
+    ROS_WARN(
+        "%s: continuing the trajectory files of a run interrupted at %s (a restart): the rows are appended to "
+        "%s/*%s.csv",
+        formatStamp(stamp).c_str(), formatStamp(reopened_last_stamp_).c_str(), output_dir_abs_.c_str(),
+        suffixFor(current_set_->index).c_str());
+    return;
+  }
+  std::unique_ptr<FileSet> next;
+  try {
+    next = openFileSet(current_set_->index + 1);
+  } catch (const std::exception& e) {
+    noteWriteError(output_dir_abs_, std::string("cannot start a new set of files: ") + e.what());
+    return;  // appending beats losing the run
+  }
+  next->generation = generation_;
+  closeFileSet(current_set_.get());
+  current_set_ = std::move(next);
+  if (have_datum_) writeDatumFile(current_set_.get());
+  resume_note_ = "a new set: " + why;
+  ROS_WARN(
+      "%s already holds trajectory files of an earlier run (%s): writing this run's with the suffix '%s' "
+      "(nothing is overwritten)",
+      output_dir_abs_.c_str(), why.c_str(), suffixFor(current_set_->index).c_str());
 }
 
 void TrajectoryLogger::startNewFileSet(const std::string& reason) {
@@ -774,7 +894,8 @@ void TrajectoryLogger::onDatum(const exocet_msgs::GeoDatum::ConstPtr& msg) {
   datum_.origin_northing_m = d.origin_northing_m;
   have_datum_ = true;
   ++datum_stream_.logged;
-  writeDatumFile(current_set_.get());
+  // The reopened set's datum.json is an earlier run's until the first message says the run is this one.
+  if (!reopened_pending_) writeDatumFile(current_set_.get());
   const std::string waiting = pending_fixes_.empty() ? std::string()
                                                      : "; converting the " + std::to_string(pending_fixes_.size()) +
                                                            " USBL fixes that came before it";
@@ -851,6 +972,7 @@ void TrajectoryLogger::diagnoseDatum(diagnostic_updater::DiagnosticStatusWrapper
 void TrajectoryLogger::diagnoseFiles(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.add("output folder", output_dir_abs_);
   status.add("file set", current_set_->index);
+  if (!resume_note_.empty()) status.add("files at start-up", resume_note_);
   status.add("clock jumps back", clock_jumps_);
   status.add("write errors", write_errors_);
   status.add("last write error", last_write_error_.empty() ? std::string("none") : last_write_error_);

@@ -751,6 +751,35 @@ int GeoTiffTileWriter::removeStaleTemporaries() const {
   return removed;
 }
 
+int GeoTiffTileWriter::removeIncompleteTiles() const {
+  DIR* folder = ::opendir(config_.output_dir.c_str());
+  if (!folder) return 0;
+  const std::string start = config_.prefix + "_";
+  std::vector<std::string> orphans;
+  while (const dirent* entry = ::readdir(folder)) {
+    const std::string name = entry->d_name;
+    if (name.rfind(start, 0) != 0) continue;
+    // <prefix>_<NNNN>[_v<K>]<companion extension>
+    std::size_t end = start.size();
+    while (end < name.size() && std::isdigit(static_cast<unsigned char>(name[end]))) ++end;
+    if (end - start.size() < 4) continue;
+    if (name.compare(end, 2, "_v") == 0) {
+      std::size_t digits = end + 2;
+      while (digits < name.size() && std::isdigit(static_cast<unsigned char>(name[digits]))) ++digits;
+      if (digits == end + 2) continue;
+      end = digits;
+    }
+    const std::string extension = name.substr(end);
+    if (extension != ".tfw" && extension != ".cog.tif" && extension != ".kmz") continue;
+    if (!fileExists(config_.output_dir + "/" + name.substr(0, end) + ".tif")) orphans.push_back(name);
+  }
+  ::closedir(folder);
+  int removed = 0;
+  for (const auto& name : orphans)
+    if (::unlink((config_.output_dir + "/" + name).c_str()) == 0) ++removed;
+  return removed;
+}
+
 WrittenTile GeoTiffTileWriter::write(const TileRaster& raster, const TileMetadata& metadata) {
   return writeAt(raster, metadata, -1);
 }

@@ -33,6 +33,7 @@
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
+#include "exocet_mosaic/tiles/tile_writer_resume.h"
 
 namespace {
 
@@ -46,26 +47,8 @@ int badInput(const std::string& why) {
 
 /// stamp_s,east_m,north_m with a header line; throws naming the line.
 et::PositionCorrectionTrack readCorrections(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::invalid_argument("cannot read the corrections '" + path + "'");
-  std::string line;
-  std::getline(in, line);
-  if (line.rfind("stamp_s,east_m,north_m", 0) != 0)
-    throw std::invalid_argument("'" + path + "' does not start with the header stamp_s,east_m,north_m");
-  std::vector<double> stamps;
-  std::vector<Eigen::Vector2d> values;
-  for (int number = 2; std::getline(in, line); ++number) {
-    if (line.empty()) continue;
-    std::istringstream fields(line);
-    double t = 0, e = 0, n = 0;
-    char c1 = 0, c2 = 0;
-    if (!(fields >> t >> c1 >> e >> c2 >> n) || c1 != ',' || c2 != ',')
-      throw std::invalid_argument("'" + path + "' line " + std::to_string(number) + ": expected stamp_s,east_m,north_m");
-    stamps.push_back(t);
-    values.emplace_back(e, n);
-  }
-  et::PositionCorrectionTrack track;
-  const int left_out = track.set(stamps, values);
+  int left_out = 0;
+  et::PositionCorrectionTrack track = et::readPositionCorrections(path, &left_out);
   if (left_out > 0)
     std::cerr << "recompose_tiles: " << left_out << " correction(s) not finite or not in time order: left out\n";
   return track;

@@ -225,10 +225,10 @@ TilesPreset loadTilesPreset(const std::string& path) {
   b.integer("kmz_max_side_px", &f.kmz_max_side_px);
   for (const char* key :
        {"preview_period_s", "preview_max_side_px", "queue_size", "sync_timeout_s", "max_pending_frames", "clock_jump_s",
-        "exit_when_idle_s", "max_failed_tiles_kept", "retry_period_s", "utm_zone", "northern_hemisphere", "undistort",
-        "transport", "image_topic", "camera_info_topic", "motion_topic", "odometry_topic", "camera_height_topic",
-        "datum_topic", "tile_topic", "preview_topic", "footprints_topic", "frame_id", "map_frame", "dive_name",
-        "udp_host", "udp_port"})
+        "exit_when_idle_s", "max_failed_tiles_kept", "retry_period_s", "resume_max_gap_s", "progress_period_s",
+        "utm_zone", "northern_hemisphere", "undistort", "transport", "image_topic", "camera_info_topic",
+        "motion_topic", "odometry_topic", "camera_height_topic", "datum_topic", "tile_topic", "preview_topic",
+        "footprints_topic", "frame_id", "map_frame", "dive_name", "udp_host", "udp_port"})
     b.ignored(key);
   b.apply();
   const std::string error = c.validate();

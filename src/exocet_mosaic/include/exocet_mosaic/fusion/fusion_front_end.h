@@ -122,6 +122,8 @@ class FusionFrontEnd {
   void setOperatorHeight(double camera_height_m) { operator_height_m_ = camera_height_m; }
   /// Starts the filter now at a given position and covariance (m^2), e.g. a re-seed, or a benchmark's start.
   void initialize(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+  /// Starts the filter from a whole saved state (NavigationFilter::resume): a restart of the node mid-dive.
+  void resume(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known);
 
   // ---- Measurements, in stamp order ----
   /// Dead reckoning of base_link (UTM grid position, metres; its covariance, m^2). It starts the filter when

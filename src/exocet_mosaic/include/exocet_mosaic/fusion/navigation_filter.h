@@ -155,7 +155,18 @@ class NavigationFilter {
   /// @throws std::invalid_argument for a non-finite stamp or position, or a covariance not symmetric positive
   ///         definite.
   void initialize(double stamp_s, const Eigen::Vector2d& camera_en_m, const Eigen::Matrix2d& covariance_m2);
+  /**
+   * @brief Starts the filter from a whole saved state at its stamp (a restart of the node mid-dive): x and P as
+   * FilterState::x / P gave them. With `dr_offset_known` the dead-reckoning offset in x is taken as known, so the
+   * first dead reckoning after the gap carries the position by its own increments (no image motion covers the gap:
+   * the position's covariance grows with the no-motion random walk up to the next input).
+   * @throws std::invalid_argument for a non-finite stamp or state, or a covariance not symmetric positive
+   *         semi-definite (its position block definite).
+   */
+  void resume(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known);
   bool initialized() const { return initialized_; }
+  /// The dead-reckoning offset is known at the latest stamp (a first dead reckoning has set it).
+  bool drOffsetKnown() const;
   /// Forgets everything (clock jump, new dive): initialize() again before adding events.
   void reset();
 
@@ -226,6 +237,7 @@ class NavigationFilter {
   double latestStamp() const;
   double windowStart() const { return latestStamp() - config_.history_s; }
   Working workingFrom(const FilterStep& step, bool prior) const;
+  void startAt(double stamp_s, const StateVector& x, const StateMatrix& P, bool dr_offset_known);
 
   FilterConfig config_;
   bool initialized_ = false;
@@ -234,6 +246,7 @@ class NavigationFilter {
   std::vector<Event> events_;  ///< within the history window, sorted by (stamp, kind, sequence)
   uint64_t next_sequence_ = 0;
   double initial_stamp_s_ = 0.0;
+  bool initial_dr_known_ = false;  ///< resume(): the offset was known at the first step
   /// Stamp of the oldest state a rewind may restart from (-inf: the initial state itself, nothing pruned yet).
   double rewind_floor_s_ = -std::numeric_limits<double>::infinity();
   double last_image_stamp_s_ = 0.0, last_dr_stamp_s_ = 0.0;

@@ -79,8 +79,8 @@ class SequenceRegistrar {
 
   /**
    * Registers `gray` (CV_8UC1), taken at `stamp_s`, against the previous image.
-   * @throws std::invalid_argument for an empty or non-CV_8UC1 image or a stamp that is not finite and positive; the
-   *         sequence is unchanged then.
+   * @throws std::invalid_argument for an empty or non-CV_8UC1 image, a stamp that is not finite and positive, or one
+   *         equal to the previous image's (a duplicated stamp: the image is skipped); the sequence is unchanged then.
    */
   SequenceStep add(const cv::Mat& gray, double stamp_s);
 

@@ -57,7 +57,9 @@ class FrameAssembler {
   /// @param timeout_s wall seconds an image waits for its parts, > 0; @param max_pending images waiting, >= 1
   FrameAssembler(double timeout_s, std::size_t max_pending);
 
-  /// Each returns false when the stamp was already released (a late part, counted in lateParts()).
+  /// Each returns false when the stamp was already released (a late part, counted in lateParts()); addImage also when
+  /// an image of that stamp is already waiting (a duplicated stamp: the first image is kept, counted in
+  /// duplicateImages()).
   /// image_size and image_channels: the decoded image's shape when the message tells it (else leave them empty).
   bool addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s,
                 cv::Size image_size = cv::Size(), int image_channels = 0);
@@ -75,6 +77,7 @@ class FrameAssembler {
 
   std::size_t pendingImages() const;
   std::int64_t lateParts() const { return late_parts_; }
+  std::int64_t duplicateImages() const { return duplicate_images_; }
   std::int64_t timedOut() const { return timed_out_; }
 
  private:
@@ -86,6 +89,7 @@ class FrameAssembler {
   std::map<std::int64_t, AssembledFrame> frames_;
   std::optional<std::int64_t> last_released_ns_;
   std::int64_t late_parts_ = 0;
+  std::int64_t duplicate_images_ = 0;
   std::int64_t timed_out_ = 0;
 };
 

@@ -97,7 +97,19 @@ struct FusionNodeConfig {
   std::string smoothed_track_csv;          ///< written at shutdown: the RTS-smoothed track (empty: not written)
   double max_position_sigma_m = 10.0;      ///< /diagnostics warns above this 1-sigma (0, 1e6] m
   double max_navigation_silence_s = 10.0;  ///< /diagnostics warns when no navigation arrived for this long (0, 1e6]
+
+  // Restart mid-dive.
+  /// The last published state, kept on disk (atomically, at most every state_save_period_s) for a restarted fusion
+  /// to resume from; empty: none. Default defaultFusionStateFile() for the node.
+  std::string state_file;
+  double state_max_age_s = 30.0;     ///< the saved state starts the filter when the first input is at most this much
+                                     ///< later (s, (0, 3600]); see fusion::resumeRefusal
+  double state_save_period_s = 1.0;  ///< wall seconds between two saves of the state (0, 60]
 };
+
+/// $ROS_HOME/exocet_fusion_state_<node>.json (~/.ros when ROS_HOME is unset), <node> the private namespace with its
+/// slashes as underscores: two fusions on one machine keep their own.
+std::string defaultFusionStateFile(const std::string& private_namespace);
 
 /// @throws std::invalid_argument naming the parameter, its value and the allowed range.
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh);

@@ -38,10 +38,12 @@
 
 #include "exocet_common/utm_grid.h"
 #include "exocet_mosaic/fusion/fusion_front_end.h"
+#include "exocet_mosaic/fusion/saved_fusion_state.h"
 #include "exocet_mosaic/graph/background_pose_graph.h"
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/graph/loop_closer.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
+#include "exocet_mosaic/ros/keyed_throttle.h"
 
 namespace exocet_mosaic {
 
@@ -60,6 +62,11 @@ namespace exocet_mosaic {
  * (throttled) and shown on /diagnostics; a stamp going back further than ~clock_jump_s (a bag replayed again, a
  * clock jump) resets the filter and the tracks. At shutdown the filtered and RTS-smoothed tracks are written to
  * CSV when ~track_csv / ~smoothed_track_csv are set.
+ *
+ * The last published state is kept in ~state_file (at most every ~state_save_period_s): a fusion restarted mid-dive
+ * (a crash, a respawn) starts its filter from it, the gap predicted as one without image motion, when its first
+ * sensor input comes within ~state_max_age_s after it (fusion::resumeRefusal); otherwise (a bag played again, another
+ * dive) it ignores it and says why.
  */
 class FusionRos {
  public:
@@ -99,6 +106,8 @@ class FusionRos {
   bool admitStamp(const ros::Time& stamp, const std::string& what, bool late_allowed);
   void resetAll(const std::string& why);
   void rejectInput(const std::string& kind, const std::string& why);
+  /// False (the sample rejected) when a sample of the stream `kind` is stamped at or before the newest one.
+  bool inStreamOrder(const std::string& kind, const ros::Time& stamp);
   void countResult(const std::string& kind, const fusion::UpdateResult& result);
 
   /// Counts and logs what became of an input the front-end took; publishes where the input calls for it.
@@ -110,6 +119,15 @@ class FusionRos {
   /// The filter has just started (from `source`): the map origin and a log line.
   void onStarted(const std::string& source);
   void initializeFromParameters();
+  /// Reads ~state_file (when set and present) for the first input to decide on.
+  void loadSavedState();
+  /// At the first sensor input (before anything reaches the filter): starts the filter from the saved state when
+  /// that belongs to this dive.
+  void maybeResume(double first_stamp_s);
+  /// Writes the filter's state to ~state_file, at most every ~state_save_period_s unless `now`.
+  void saveState(bool now);
+  /// The map origin given (a resumed dive keeps its own), broadcast as ensureMapOrigin does.
+  void setMapOrigin(const Eigen::Vector2d& origin_en_m);
   /// Images only and no first point: the dive is mapped from (0, 0) in the local frame ~map_frame (said once).
   void startInLocalFrame();
 
@@ -201,8 +219,17 @@ class FusionRos {
   // Counts for /diagnostics.
   uint64_t motions_ = 0, motion_failures_ = 0, dead_reckonings_ = 0, fixes_ = 0, resets_ = 0;
   std::map<std::string, uint64_t> applied_, gated_, too_old_, invalid_, rejected_inputs_;
+  KeyedThrottle rejection_log_{2.0};                       ///< per kind of input
+  std::map<std::string, ros::Time> newest_sample_stamps_;  ///< of the interpolated streams (imu, altitude, depth)
   std::string last_problem_;
   ros::WallTime last_nav_wall_, last_motion_wall_;
+
+  // Restart mid-dive.
+  std::optional<fusion::SavedFusionState> saved_state_;  ///< read at start, decided on at the first input
+  std::string started_from_;                             ///< what started the filter last
+  std::string resume_note_;                              ///< what became of the saved state
+  ros::SteadyTime last_state_save_;
+  uint64_t state_saves_ = 0, state_save_failures_ = 0;
 };
 
 }  // namespace exocet_mosaic

@@ -24,6 +24,7 @@
 #include "exocet_mosaic/registration/registration_config.h"
 #include "exocet_mosaic/registration/sequence_registrar.h"
 #include "exocet_mosaic/ros/dive_topics.h"
+#include "exocet_mosaic/ros/keyed_throttle.h"
 
 namespace exocet_mosaic {
 
@@ -106,6 +107,7 @@ class RegistrationRos {
   std::deque<double> recent_inlier_fraction_;
   double processing_ms_sum_ = 0.0, processing_ms_max_ = 0.0;
   std::string last_problem_;
+  KeyedThrottle reject_log_{5.0};  ///< rejected images, per kind of problem
 };
 
 }  // namespace exocet_mosaic

@@ -54,6 +54,10 @@ struct TileWriterNodeConfig {
   double exit_when_idle_s = 0;    ///< > 0: flush and shut down after this many wall seconds without input (replays)
   int max_failed_tiles_kept = 2;  ///< closed mosaics kept in memory for a retry after a write failure
   double retry_period_s = 10.0;
+  /// An interrupted run left in the output folder is carried on when the first image comes at most this much after its
+  /// newest image (s, (0, 1e6]); see tiles::continuationRefusal.
+  double resume_max_gap_s = 600.0;
+  double progress_period_s = 1.0;  ///< wall seconds between two saves of the run's progress, (0, 60]
   // Tiles that follow the pose graph.
   /// exocet_msgs/PositionCorrections of the fusion's pose graph; empty: the tiles stay as written. When set, each
   /// image is placed at the fused pose plus the graph's correction at its time, and a written tile is drawn again

@@ -19,18 +19,25 @@
  * With ~image_gain_compensation (and kept images, with or without the graph) the same thread solves a gain per kept
  * image over every overlap (compose::ImageGains) and draws a tile again when its images' gains changed: the levels of
  * one pass and the next, which a gain per tile cannot match along a whole tile, are matched per image.
+ *
+ * A run carries over restarts (tiles::TileWriterProgress): the writer saves its progress in the output folder at each
+ * tile and every ~progress_period_s. An instance that finds an interrupted run there (killed, not ended normally) and
+ * whose first image continues its stamps carries it on: the tile indices, the frame numbers and the counts go on,
+ * the records of the tiles written before are read back (they can be drawn again by the graph or the image gains),
+ * and the frames the killed instance held but had not written are counted as lost.
  */
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <condition_variable>
 #include <deque>
-#include <map>
-#include <set>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -52,10 +59,12 @@
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/registration/image_undistorter.h"
 #include "exocet_mosaic/ros/frame_assembler.h"
+#include "exocet_mosaic/ros/keyed_throttle.h"
 #include "exocet_mosaic/ros/tile_writer_parameters.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
+#include "exocet_mosaic/tiles/tile_writer_resume.h"
 
 namespace exocet_mosaic {
 
@@ -88,8 +97,9 @@ class TileWriterRos {
   void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
                    int image_channels);
   void checkClock(std::int64_t stamp_ns);
-  /// Adds a part to the assembler under the lock (add returns false for a late part), then composes what is ready.
-  void addAndProcess(const std::function<bool(double now_s)>& add);
+  /// Adds a part to the assembler under the lock, then composes what is ready; false (nothing done) when `add`
+  /// refused the part (a late part, a repeated image).
+  bool addAndProcess(const std::function<bool(double now_s)>& add);
 
   void processReady(std::vector<AssembledFrame> frames);
   void compose(const AssembledFrame& frame);
@@ -133,6 +143,22 @@ class TileWriterRos {
   void writeRunSummary();
   void reject(const std::string& why);
 
+  // A run carried over restarts.
+  /// Reads the progress an earlier instance left in the output folder (and, for an interrupted run, its tiles'
+  /// records) at start-up.
+  void loadPreviousRun();
+  /// At the first image: carries the interrupted run on, or starts a new one, and says which.
+  void decideRun(double first_stamp_s);
+  /// Takes the interrupted run's counts and frame numbers (and, with `adopt_tiles`, its tiles' records) as this
+  /// instance's starting point.
+  void continueRun(const tiles::TileWriterProgress& previous, bool adopt_tiles);
+  /// Writes the run's progress (tiles::tileWriterProgressPath) atomically; `finished` at a normal end.
+  void saveProgress(bool finished);
+  /// Frames received but in no tile on disk (write_mutex_ held); `next_frame` is the index the next image takes.
+  int framesNotOnDiskLocked(int next_frame) const;
+  /// Rerender thread: the levels of the kept images of a continued run, for the image gains.
+  void loadKeptImageLevels();
+
   ros::NodeHandle nh_, private_nh_;
   TileWriterNodeConfig config_;
   image_transport::ImageTransport image_transport_;
@@ -153,7 +179,7 @@ class TileWriterRos {
   std::string active_transport_;
   std::optional<std::int64_t> newest_stamp_ns_;
   std::optional<std::int64_t> last_composed_stamp_ns_;
-  int next_frame_index_ = 0;
+  std::atomic<int> next_frame_index_{0};     ///< frames are numbered across the run's instances
   std::vector<double> tile_fused_sigmas_m_;  ///< fused 1-sigma of the open mosaic's images (m)
   sensor_msgs::CameraInfoConstPtr camera_info_;
   // Shared with the loaders of images not decoded yet (the composer may decode one after a calibration change).
@@ -220,11 +246,29 @@ class TileWriterRos {
   double last_image_gain_ms_ = 0;                             ///< (write_mutex_)
   std::int64_t image_gain_solves_ = 0, tiles_redrawn_for_gains_ = 0;  ///< (write_mutex_)
 
+  // A run carried over restarts.
+  std::optional<tiles::TileWriterProgress> previous_run_;  ///< found in the folder at start-up
+  tiles::KeptTiles kept_tiles_;                            ///< the interrupted run's records, until decideRun()
+  std::atomic<bool> run_decided_{false};
+  std::string run_note_;                ///< new run or continued, and why (callback thread)
+  tiles::TileWriterProgress run_base_;  ///< counts of the run's earlier instances (write_mutex_)
+  int frames_lost_at_restart_ = -1;     ///< -1: this instance did not carry a run on (write_mutex_)
+  int newest_frame_on_disk_ = -1;       ///< last frame of the newest tile written (write_mutex_)
+  std::atomic<double> newest_image_stamp_s_{0.0};
+  std::mutex progress_mutex_;  ///< one progress write at a time (writer thread and timer)
+  ros::WallTime last_progress_wall_;
+  std::int64_t progress_images_ = -1;        ///< images_ at the last progress save (timer)
+  std::int64_t progress_failures_ = 0;       ///< (progress_mutex_)
+  std::string last_progress_error_;          ///< (progress_mutex_)
+  std::vector<std::string> levels_to_load_;  ///< kept images whose levels the gains need (image_gains_mutex_)
+
   // Counters for /diagnostics.
-  std::int64_t images_ = 0, frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;
+  std::atomic<std::int64_t> images_{0};
+  std::int64_t frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;
   std::int64_t poses_ = 0, camera_heights_ = 0;  ///< fused poses and camera heights received
   std::int64_t tiles_written_ = 0, write_failures_ = 0, tiles_dropped_ = 0, udp_failures_ = 0;
   std::string last_problem_, last_write_error_;
+  KeyedThrottle reject_log_{5.0};  ///< callback thread
 };
 
 }  // namespace exocet_mosaic

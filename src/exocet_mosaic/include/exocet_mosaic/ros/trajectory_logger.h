@@ -18,9 +18,12 @@
  * one, they are written with nan easting/northing). USBL rows keep the arrival order, which a varying acoustic
  * latency may make differ slightly from the stamp order.
  *
- * The node never overwrites: if the files already exist, or when the ROS clock or a topic's stamps jump back (a bag
- * replayed again, `rosbag play --loop`), it starts a new set with a suffix (`ground_truth_2.csv`, ...) rather than
- * interleave two timelines in one file. Rows go to the final file names as whole lines, flushed every
+ * The node never overwrites and never interleaves two timelines in one file. At start-up it takes the newest set of
+ * files in the folder as possibly its own, restarted after a crash: the first message decides. Stamped at most a
+ * second before the files' last row and at most `~resume_max_gap_s` after it, it continues that timeline and the rows
+ * are appended (a partial last row, cut by the crash, is removed first); otherwise (a bag played again, another dive)
+ * the node starts a new set with a suffix (`ground_truth_2.csv`, ...). The same happens when the ROS clock or a topic's
+ * stamps jump back mid-run (`rosbag play --loop`). Rows go to the final file names as whole lines, flushed every
  * `~flush_period_s` and at shutdown, so after a crash every file holds whole rows up to the last flush.
  */
 #pragma once
@@ -50,6 +53,9 @@ struct TrajectoryLoggerConfig {
   std::string usbl_topic = topics::kNavUsbl;                      ///< sensor_msgs/NavSatFix
   std::string datum_topic = topics::kNavDatum;                    ///< exocet_msgs/GeoDatum
   std::string utm_frame = frames::kUtm;  ///< the only header.frame_id accepted on the odometry topics
+  /// The newest set of files in the folder is appended to when the first message comes at most this long after its
+  /// last row (s, (0, 1e6]): a restart mid-dive.
+  double resume_max_gap_s = 600.0;
 };
 
 /**
@@ -163,6 +169,10 @@ class TrajectoryLogger {
   FileSet* placeInTime(Stream* stream, const ros::Time& stamp, bool reorder_ok);
   void startNewFileSet(const std::string& reason);
   std::unique_ptr<FileSet> openFileSet(int first_index);
+  /// The newest complete set of files in the folder, opened for appending; nullptr when there is none.
+  std::unique_ptr<FileSet> reopenNewestFileSet();
+  /// At the first message (stamped `stamp`): appends to the reopened set, or starts a new one, and says which.
+  void decideOnReopenedSet(const ros::Time& stamp);
   void writeDatumFile(FileSet* set);
   void closeFileSet(FileSet* set);
   void convertPendingFixes();
@@ -190,6 +200,9 @@ class TrajectoryLogger {
   uint64_t clock_generation_ = 0;          ///< generation the ROS clock's timeline belongs to
   ros::Time last_clock_;
   uint64_t clock_jumps_ = 0;
+  bool reopened_pending_ = false;  ///< current_set_ is the folder's newest set, reopened; the first message decides
+  ros::Time reopened_last_stamp_;  ///< the newest stamp of its rows (zero: none)
+  std::string resume_note_;        ///< what became of it, for /diagnostics
 
   bool have_datum_ = false;
   exocet_msgs::GeoDatum datum_msg_;

@@ -83,6 +83,10 @@ class GeoTiffTileWriter {
   /// Removes the temporaries left in output_dir by a killed writer of this prefix (".<prefix>_*.partial*"); call it
   /// at start-up, when no other writer of this folder and prefix runs. Returns how many files it removed.
   int removeStaleTemporaries() const;
+  /// Removes the companions (.tfw, .cog.tif, .kmz) of a tile whose GeoTIFF is missing: a writer killed between the
+  /// renames of one tile's files (the GeoTIFF goes last). Call it at start-up, as removeStaleTemporaries(). Returns
+  /// how many files it removed.
+  int removeIncompleteTiles() const;
 
   /// Final file names (no folder) of tile `index`: "<prefix>_<NNNN>" + ".tif" / ".tfw" / ".cog.tif" / ".kmz".
   std::string baseName(int index) const;
