@@ -145,7 +145,7 @@ class NodeKillReplayTest(unittest.TestCase):
                     'registration gaps bridged by the navigation', '0')) > bridged, 8.0)
             if node == 'tile_writer' and back:
                 self.writer_status = None
-                reported = self.wait_for(lambda: 'carried on' in self.writer_value('run', ''), BACK_TIMEOUT_S)
+                reported = self.wait_for(lambda: self.writer_value('run', '').startswith('carried on'), BACK_TIMEOUT_S)
                 kill['frames_lost'] = int(self.writer_value('frames lost at the last restart', '-1')) if reported \
                     else None
             kills.append(kill)
