@@ -12,7 +12,7 @@ export CCACHE_BASEDIR := $(CURDIR)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 LAUNCHER := $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=$(CCACHE))
 
-.PHONY: all deps build bags demo test check bench format clean
+.PHONY: all deps build bags demo test check bench soak format clean
 all: build
 
 deps:
@@ -41,6 +41,11 @@ check: build
 bench: build
 	@tools/make-bags.sh sample_out_and_back
 	@tools/run-bench.sh
+
+# The soak benchmark (not part of make test or make bench): an hour-long simulated survey through the whole live chain,
+# each node's memory and CPU over the dive (out/bench/soak.json, soak_* keys of out/bench/reliability.json).
+soak: build
+	@tools/run-soak.sh
 
 format:
 	@find src tests -name '*.cpp' -o -name '*.h' | xargs clang-format -i

@@ -1,6 +1,7 @@
 // The navigation filter (2D3 section 3.5, extended): hand-computed Kalman step, batch least squares, gating and
 // recovery, out-of-sequence fixes, dropouts, registration failures, invalid input, consistency (NEES).
 #include <cmath>
+#include <filesystem>
 #include <iostream>
 #include <limits>
 #include <string>
@@ -106,8 +107,10 @@ TEST(NavigationFilter, ImageStepNoiseIsAlongAndAcrossTheMotion) {
   EXPECT_NEAR(across.dot(S * across), 2.5e-7, 1e-15);
   EXPECT_NEAR(along.dot(S * across), 0.0, 1e-15);
   // A motion with no direction: the mean of the two variances on each axis.
-  EXPECT_LT((config.imageStepNoiseCovariance(Eigen::Vector2d::Zero()) -
-             0.5 * (4e-6 + 2.5e-7) * Eigen::Matrix2d::Identity()).norm(), 1e-18);
+  EXPECT_LT(
+      (config.imageStepNoiseCovariance(Eigen::Vector2d::Zero()) - 0.5 * (4e-6 + 2.5e-7) * Eigen::Matrix2d::Identity())
+          .norm(),
+      1e-18);
 
   // Through the filter: the predicted covariance holds S in the world frame (no heading error, no pixel-size error
   // in the linear configuration); a step eastwards gets its along-track noise on the east axis only.
@@ -199,8 +202,8 @@ TEST(NavigationFilter, DeadReckoningScaleErrorIsEstimated) {
     return std::sqrt(sum / count);
   };
   EXPECT_LT(rmse_at_images(filter), 0.8 * rmse_at_images(plain));
-  std::cout << "with the scale state " << rmse_at_images(filter) << " m, without " << rmse_at_images(plain) << " m; scale " << s.dr_scale_error << " +- "
-            << s.dr_scale_error_sigma << "\n";
+  std::cout << "with the scale state " << rmse_at_images(filter) << " m, without " << rmse_at_images(plain)
+            << " m; scale " << s.dr_scale_error << " +- " << s.dr_scale_error_sigma << "\n";
 }
 
 TEST(NavigationFilter, FilterEqualsBatchLeastSquaresOnALinearModel) {
@@ -626,6 +629,46 @@ TEST(NavigationFilter, LogOffKeepsOnlyTheWindowAndGivesTheSameEstimates) {
   EXPECT_LT((full.current().x - bounded.current().x).norm(), 1e-12);
   EXPECT_GT(full.log().steps.size(), 600u);
   EXPECT_LT(largest, 4.0 * 16 + 20);  // 4 s of 10 DR + 5 image + 1 fix stamps, and a margin
+}
+
+TEST(NavigationFilter, LogWrittenOutStaysBoundedInMemoryAndReadsBackWhole) {
+  SyntheticDiveConfig dc;
+  dc.duration_s = 60.0;
+  dc.seed = 22;
+  dc.model = FilterConfig();
+  dc.model.history_s = 4.0;
+  const SyntheticDive dive = makeSyntheticDive(dc);
+  const std::string path = (std::filesystem::temp_directory_path() / "exocet_test_filter_steps.bin").string();
+  NavigationFilter full(dc.model), written(dc.model);
+  written.setLogFile(path);
+  full.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  written.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  size_t largest = 0;
+  for (const NavEvent& e : dive.events) {
+    feed(full, e);
+    feed(written, e);  // out-of-sequence fixes included: a rewind never reaches the written steps
+    largest = std::max(largest, written.log().steps.size());
+  }
+  EXPECT_LT(largest, 4.0 * 16 + 20);
+  EXPECT_GT(written.loggedToFile(), 500u);
+  EXPECT_EQ(std::filesystem::file_size(path), written.loggedToFile() * FilterStepFile::recordBytes());
+  const FilterLog whole = written.wholeLog();
+  ASSERT_EQ(whole.steps.size(), full.log().steps.size());
+  for (size_t i = 0; i < whole.steps.size(); ++i) {
+    const FilterStep &a = whole.steps[i], &b = full.log().steps[i];
+    ASSERT_EQ(a.stamp_s, b.stamp_s) << i;
+    EXPECT_EQ(a.x_posterior, b.x_posterior) << i;
+    EXPECT_EQ(a.P_prior, b.P_prior) << i;
+    EXPECT_EQ(a.transition, b.transition) << i;
+    EXPECT_EQ(a.image_motion, b.image_motion) << i;
+    EXPECT_EQ(a.fixes_applied, b.fixes_applied) << i;
+    EXPECT_EQ(a.dr_initialized, b.dr_initialized) << i;
+  }
+  // Back to memory: the written steps return, the file goes.
+  written.setLogFile("");
+  EXPECT_EQ(written.log().steps.size(), full.log().steps.size());
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_THROW(written.setLogFile("/proc/exocet_no_such_folder/steps.bin"), std::runtime_error);
 }
 
 TEST(NavigationFilter, ConsistentOnDivesGeneratedFromItsModel) {

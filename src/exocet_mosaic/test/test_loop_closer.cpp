@@ -1,6 +1,7 @@
 // LoopCloser: live loop closure from rendered key frames of an out-and-back line whose return pass drifted.
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -15,7 +16,8 @@ namespace {
 
 using namespace testing;
 
-TEST(LoopCloser, ClosesTheLoopsOfADriftedReturnPass) {
+/// The scene of ClosesTheLoopsOfADriftedReturnPass, searched with `config`; checks the loops close.
+void closeTheLoopsOfADriftedReturnPass(const LoopCloserConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   sim::ProceduralSeabedConfig seabed;
   seabed.seed = 20261205;
@@ -53,7 +55,6 @@ TEST(LoopCloser, ClosesTheLoopsOfADriftedReturnPass) {
   }
 
   BackgroundPoseGraph graph;
-  LoopCloserConfig config;
   LoopCloser closer(config, &graph);
   for (size_t i = 0; i < truth.size(); ++i) {
     graph.addKeyFrame(int64_t(i), stamps[i], chain[i]);
@@ -89,8 +90,8 @@ TEST(LoopCloser, ClosesTheLoopsOfADriftedReturnPass) {
   for (char a : snapshot->loop_accepted) accepted += a;
   std::cout << stats.key_frames_done << " key frames searched, " << stats.candidates << " candidates verified, "
             << stats.loops_added << " loops added, " << accepted << " accepted by the graph, " << stats.dropped
-            << " dropped; return pass worst error " << worst_before << " m -> " << worst_after << " m; last refusal: "
-            << stats.last_refusal << "; "
+            << " dropped; return pass worst error " << worst_before << " m -> " << worst_after
+            << " m; last refusal: " << stats.last_refusal << "; "
             << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s\n";
   EXPECT_TRUE(stats.last_error.empty()) << stats.last_error;
   EXPECT_EQ(stats.key_frames_done, truth.size());
@@ -98,6 +99,23 @@ TEST(LoopCloser, ClosesTheLoopsOfADriftedReturnPass) {
   EXPECT_EQ(accepted, int(stats.loops_added));
   EXPECT_GT(worst_before, 0.5);
   EXPECT_LT(worst_after, 0.02);
+  if (!config.image_folder.empty()) {
+    // The images beyond the memory's few were read back from their files.
+    EXPECT_EQ(stats.images.in_memory, static_cast<uint64_t>(config.images_in_memory));
+    EXPECT_EQ(stats.images.on_disk, truth.size());
+    EXPECT_EQ(stats.images.lost, 0u);
+    EXPECT_EQ(stats.refusals.count("image unavailable"), 0u);
+  }
+}
+
+TEST(LoopCloser, ClosesTheLoopsOfADriftedReturnPass) { closeTheLoopsOfADriftedReturnPass(LoopCloserConfig()); }
+
+TEST(LoopCloser, ClosesTheLoopsWithItsImagesOnDisk) {
+  LoopCloserConfig config;
+  config.image_folder = (std::filesystem::temp_directory_path() / "exocet_test_loop_closer_images").string();
+  config.images_in_memory = 2;
+  closeTheLoopsOfADriftedReturnPass(config);
+  std::filesystem::remove_all(config.image_folder);
 }
 
 TEST(LoopCloser, BadInputIsRefusedWithItsName) {

@@ -89,6 +89,7 @@ FusionFrontEnd::FusionFrontEnd(const FusionFrontEndConfig& config, MountLookup m
       depth_m_(config.history_window_s, config.depth_max_gap_s) {
   if (!mounts_) throw std::invalid_argument("fusion: no mount lookup given");
   filter_.setKeepLog(config.keep_log);
+  if (config.keep_log && !config.log_file.empty()) filter_.setLogFile(config.log_file);
 }
 
 void FusionFrontEnd::addImuAttitude(double stamp_s, const Eigen::Quaterniond& world_from_base) {

@@ -155,6 +155,7 @@ NavigationFilter::NavigationFilter(const FilterConfig& config) : config_(config)
 void NavigationFilter::reset() {
   initialized_ = false;
   log_.steps.clear();
+  if (log_file_) log_file_->clear();
   events_.clear();
   have_image_ = have_dr_ = false;
   last_image_stamp_s_ = last_dr_stamp_s_ = 0.0;
@@ -209,6 +210,27 @@ void NavigationFilter::startAt(double stamp_s, const StateVector& x, const State
 bool NavigationFilter::drOffsetKnown() const {
   return initialized_ && !log_.steps.empty() && log_.steps.back().dr_initialized;
 }
+
+void NavigationFilter::setLogFile(const std::string& path) {
+  // The steps written so far come back into memory; the next prune writes them to the new file.
+  if (log_file_) {
+    FilterLog whole = wholeLog();
+    log_.steps.swap(whole.steps);
+    log_file_.reset();
+  }
+  if (!path.empty()) log_file_ = std::make_unique<FilterStepFile>(path);
+}
+
+FilterLog NavigationFilter::wholeLog() const {
+  FilterLog whole;
+  if (log_file_) log_file_->readAll(&whole.steps);
+  whole.steps.insert(whole.steps.end(), log_.steps.begin(), log_.steps.end());
+  return whole;
+}
+
+uint64_t NavigationFilter::loggedToFile() const { return log_file_ ? log_file_->size() : 0; }
+
+std::string NavigationFilter::logFileError() const { return log_file_ ? log_file_->error() : std::string(); }
 
 void NavigationFilter::setKeepLog(bool keep) {
   keep_log_ = keep;
@@ -709,7 +731,11 @@ void NavigationFilter::prune() {
   if (it == steps.begin()) return;
   --it;
   const double keep_from_s = it->stamp_s;
-  if (!keep_log_) steps.erase(steps.begin(), it);
+  if (!keep_log_) {
+    steps.erase(steps.begin(), it);
+  } else if (log_file_ && log_file_->append(steps.begin(), it)) {
+    steps.erase(steps.begin(), it);  // written out; on a failed write they stay and go with the next ones
+  }
   rewind_floor_s_ = keep_from_s;
   // Events at or before that step are folded into its posterior; image events ending later still give coverage.
   auto e = std::upper_bound(events_.begin(), events_.end(), keep_from_s,

@@ -22,6 +22,7 @@ std::string LoopCloserConfig::validate() const {
   if (max_image_side_px < 64 || max_image_side_px > 100000)
     e << "max_image_side_px = " << max_image_side_px << " outside [64, 100000]; ";
   if (!(idle_wait_s > 0.0)) e << "idle_wait_s = " << idle_wait_s << " must be > 0; ";
+  if (images_in_memory < 1) e << "images_in_memory = " << images_in_memory << " must be >= 1; ";
   std::string text = e.str();
   if (text.size() >= 2) text.resize(text.size() - 2);
   return text;
@@ -46,7 +47,11 @@ std::string refusalKind(const std::string& reason) {
 }  // namespace
 
 LoopCloser::LoopCloser(const LoopCloserConfig& config, BackgroundPoseGraph* graph)
-    : config_(validated(config)), graph_(graph), verifier_(config_.verifier), finder_(config_.candidates) {
+    : config_(validated(config)),
+      graph_(graph),
+      verifier_(config_.verifier),
+      finder_(config_.candidates),
+      images_(config_.image_folder, config_.images_in_memory) {
   if (!graph_) throw std::invalid_argument("loop closer: no pose graph given");
   worker_ = std::thread([this]() { run(); });
 }
@@ -114,9 +119,9 @@ void LoopCloser::addKeyFrame(const LoopCloserKeyFrame& key_frame) {
 
 bool LoopCloser::waitIdle(double timeout_s) {
   std::unique_lock<std::mutex> lock(mutex_);
-  return idle_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                        [this]() { return stopping_ || (queue_.empty() && !busy_); }) &&
-         !stopping_;
+  return idle_.wait_for(lock, std::chrono::duration<double>(timeout_s), [this]() {
+    return stopping_ || (queue_.empty() && !busy_);
+  }) && !stopping_;
 }
 
 LoopCloserStats LoopCloser::stats() const {
@@ -148,22 +153,23 @@ void LoopCloser::run() {
   }
 }
 
-const LoopFeatures& LoopCloser::featuresOf(int64_t id, const cv::Mat* gray) {
+const LoopFeatures* LoopCloser::featuresOf(int64_t id, const cv::Mat* gray) {
   for (auto it = feature_cache_.begin(); it != feature_cache_.end(); ++it)
     if (it->first == id) {
       feature_cache_.splice(feature_cache_.begin(), feature_cache_, it);
-      return feature_cache_.front().second;
+      return &feature_cache_.front().second;
     }
   cv::Mat image;
   if (gray) {
     image = *gray;
   } else {
-    const Stored& s = stored_.at(id);
-    image = cv::imdecode(s.jpeg, cv::IMREAD_GRAYSCALE);
+    const std::optional<std::vector<uchar>> jpeg = images_.get(id);
+    if (jpeg) image = cv::imdecode(*jpeg, cv::IMREAD_GRAYSCALE);
+    if (image.empty()) return nullptr;
   }
   feature_cache_.emplace_front(id, verifier_.features(image));
   while (static_cast<int>(feature_cache_.size()) > config_.feature_cache_size) feature_cache_.pop_back();
-  return feature_cache_.front().second;
+  return &feature_cache_.front().second;
 }
 
 void LoopCloser::process(const Pending& pending) {
@@ -172,7 +178,7 @@ void LoopCloser::process(const Pending& pending) {
   const std::shared_ptr<const GraphSnapshot> snapshot = graph_->snapshot();
   if (snapshot && snapshot->sequence != snapshot_applied_) {
     for (const KeyFramePose& p : snapshot->key_frames) {
-      if (!stored_.count(p.id)) continue;
+      if (!views_.count(p.id)) continue;
       const LoopKeyFrame& old = finder_.keyFrame(p.id);
       finder_.updatePose(p.id, p.pose, old.position_cov_m2, old.yaw_sigma_rad);
     }
@@ -192,12 +198,22 @@ void LoopCloser::process(const Pending& pending) {
         if (stopping_) return;
         ++stats_.candidates;
       }
+      const LoopFeatures* old_features = featuresOf(c.id, nullptr);
+      if (!old_features) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++stats_.refusals["image unavailable"];
+        stats_.last_refusal = "key frames " + std::to_string(c.id) + " -> " + std::to_string(query.id) +
+                              ": the earlier key frame's image is unavailable (" + images_.stats().last_error + ")";
+        continue;
+      }
+      // The query's features go in front of the candidate's, which stay (feature_cache_size >= 2; list nodes stay put).
       const LoopVerification v =
-          verifier_.verify(featuresOf(c.id, nullptr), stored_.at(c.id).view, featuresOf(query.id, &k.gray), k.view);
+          verifier_.verify(*old_features, views_.at(c.id), *featuresOf(query.id, &k.gray), k.view);
       std::lock_guard<std::mutex> lock(mutex_);
       if (!v.accepted) {
         ++stats_.refusals[refusalKind(v.reason)];
-        stats_.last_refusal = "key frames " + std::to_string(c.id) + " -> " + std::to_string(query.id) + ": " + v.reason;
+        stats_.last_refusal =
+            "key frames " + std::to_string(c.id) + " -> " + std::to_string(query.id) + ": " + v.reason;
         continue;
       }
       graph_->addLoop(c.id, query.id, v.new_in_old, v.covariance);
@@ -205,13 +221,14 @@ void LoopCloser::process(const Pending& pending) {
       ++added;
     }
   }
-  Stored stored;
-  stored.view = k.view;
-  cv::imencode(".jpg", k.gray, stored.jpeg, {cv::IMWRITE_JPEG_QUALITY, config_.jpeg_quality});
-  stored_[query.id] = std::move(stored);
+  std::vector<uchar> jpeg;
+  cv::imencode(".jpg", k.gray, jpeg, {cv::IMWRITE_JPEG_QUALITY, config_.jpeg_quality});
+  images_.put(query.id, std::move(jpeg));
+  views_[query.id] = k.view;
   finder_.addKeyFrame(k.key_frame);
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.key_frames_done;
+  stats_.images = images_.stats();
 }
 
 }  // namespace graph

@@ -60,21 +60,39 @@ void readFilterConfig(const ros::NodeHandle& filter_nh, fusion::FilterConfig* f)
   if (!problems.empty()) throw std::invalid_argument("parameters ~filter/...: " + problems);
 }
 
-}  // namespace
-
-std::string defaultFusionStateFile(const std::string& private_namespace) {
-  std::string node = private_namespace;
-  std::replace(node.begin(), node.end(), '/', '_');
-  const std::string name = "/exocet_fusion_state" + node + ".json";
+/// `name` (from "/") in $ROS_HOME, or ~/.ros when ROS_HOME is unset.
+std::string inRosHome(const std::string& name) {
   const char* ros_home = std::getenv("ROS_HOME");
   if (ros_home != nullptr && *ros_home != '\0') return std::string(ros_home) + name;
   const char* home = std::getenv("HOME");
   return std::string(home != nullptr ? home : ".") + "/.ros" + name;
 }
 
+std::string nodeSuffix(const std::string& private_namespace) {
+  std::string node = private_namespace;
+  std::replace(node.begin(), node.end(), '/', '_');
+  return node;
+}
+
+}  // namespace
+
+std::string defaultFusionStateFile(const std::string& private_namespace) {
+  return inRosHome("/exocet_fusion_state" + nodeSuffix(private_namespace) + ".json");
+}
+
+std::string defaultLoopImageFolder(const std::string& private_namespace) {
+  return inRosHome("/exocet_loop_images" + nodeSuffix(private_namespace));
+}
+
+std::string defaultSmootherLogFile(const std::string& private_namespace) {
+  return inRosHome("/exocet_fusion_steps" + nodeSuffix(private_namespace) + ".bin");
+}
+
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   FusionNodeConfig c;
   c.state_file = defaultFusionStateFile(private_nh.getNamespace());
+  c.loop_image_folder = defaultLoopImageFolder(private_nh.getNamespace());
+  c.smoother_log_file = defaultSmootherLogFile(private_nh.getNamespace());
   const exocet_common::ParameterReader params(private_nh);
   readFilterConfig(ros::NodeHandle(private_nh, "filter"), &c.filter);
 
@@ -168,8 +186,13 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                   "with ~pose_graph: find, verify and add loops live from the key frames' images (~loop_image_topic)");
   if (c.loop_closure && !c.pose_graph)
     throw std::invalid_argument("parameter ~loop_closure is true but ~pose_graph is false: loops need the pose graph");
+  params.readOptionalString(
+      "loop_image_folder", &c.loop_image_folder,
+      "folder of the loop closer's key-frame images beyond the few in memory; empty: all in memory");
   params.readBool("keep_smoother_log", &c.keep_smoother_log,
-                  "keep the whole dive for the RTS smoother (memory grows with the dive)");
+                  "keep the whole dive for the RTS smoother and the track files");
+  params.readOptionalString("smoother_log_file", &c.smoother_log_file,
+                            "file the filter's older steps are written to (bounded memory); empty: held in memory");
   params.readOptionalString("track_csv", &c.track_csv, "file for the filtered track at shutdown, empty for none");
   params.readOptionalString("smoothed_track_csv", &c.smoothed_track_csv,
                             "file for the RTS-smoothed track at shutdown, empty for none");

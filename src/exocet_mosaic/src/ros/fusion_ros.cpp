@@ -45,6 +45,20 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   fu::FusionFrontEndConfig front_end;
   front_end.filter = config_.filter;
   front_end.keep_log = config_.keep_smoother_log;
+  if (config_.keep_smoother_log && !config_.smoother_log_file.empty()) {
+    // A folder that cannot take the file must not stop the fusion: the log is then held in memory.
+    std::FILE* probe = std::fopen(config_.smoother_log_file.c_str(), "ab");
+    if (probe) {
+      std::fclose(probe);
+      front_end.log_file = config_.smoother_log_file;
+    } else {
+      ROS_ERROR(
+          "fusion: ~smoother_log_file %s cannot be written (%s): the filter's steps are held in memory, which "
+          "grows with the dive",
+          config_.smoother_log_file.c_str(), std::strerror(errno));
+      config_.smoother_log_file.clear();
+    }
+  }
   front_end.attitude_max_gap_s = config_.attitude_max_gap_s;
   front_end.altitude_max_gap_s = config_.altitude_max_gap_s;
   front_end.view_half_window_s = config_.view_half_window_s;
@@ -904,7 +918,11 @@ void FusionRos::startGraph() {
   if (graph_) graph_->stop();
   graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph::BackgroundPoseGraphConfig());
   feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
-  if (config_.loop_closure) loop_closer_ = std::make_unique<graph::LoopCloser>(graph::LoopCloserConfig(), graph_.get());
+  if (config_.loop_closure) {
+    graph::LoopCloserConfig loop_config;
+    loop_config.image_folder = config_.loop_image_folder;
+    loop_closer_ = std::make_unique<graph::LoopCloser>(loop_config, graph_.get());
+  }
   graph_last_yaw_rad_.reset();
   key_frame_filter_en_m_.clear();
 }
@@ -974,9 +992,9 @@ void FusionRos::offerKeyFrame(int64_t id, double stamp_s, const std::optional<Ei
   kf.view.camera_height_m = *height_m;
   kf.view.camera_height_sigma_m = 0.05;
   // The camera in the key frame's level frame (x along its yaw, y left, z up): the attitude without the yaw.
-  kf.view.level_from_camera = (Eigen::AngleAxisd(-yaw_rad, Eigen::Vector3d::UnitZ()) * world_from_base *
-                               Eigen::Quaterniond(camera->linear()))
-                                  .normalized();
+  kf.view.level_from_camera =
+      (Eigen::AngleAxisd(-yaw_rad, Eigen::Vector3d::UnitZ()) * world_from_base * Eigen::Quaterniond(camera->linear()))
+          .normalized();
   kf.view.tilt_sigma_rad = attitude ? 0.005 : 0.03;
   kf.gray = gray;
   try {
@@ -1014,8 +1032,8 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
       // The fused displacement since the last key frame (the fused position there, not the graph's).
       const graph::FeederKeyFrame& last = feeder_->keyFrames().back();
       const auto last_fused = key_frame_filter_en_m_.find(last.id);
-      const Eigen::Vector2d from = last_fused != key_frame_filter_en_m_.end() ? last_fused->second
-                                                                             : last.initial.position_en_m;
+      const Eigen::Vector2d from =
+          last_fused != key_frame_filter_en_m_.end() ? last_fused->second : last.initial.position_en_m;
       key_frame = feeder_->addImageFailure(stamp_s, state.position_en_m - from, *yaw_rad);
       ++graph_navigation_ties_;
     }
@@ -1074,7 +1092,14 @@ bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Respons
     response.message = "~keep_smoother_log is false: the dive was not kept for smoothing";
     return true;
   }
-  const std::vector<fu::FilterState> smoothed = fu::smoothRts(front_end_->filter().log());
+  std::vector<fu::FilterState> smoothed;
+  try {
+    smoothed = fu::smoothRts(front_end_->filter().wholeLog());
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.message = std::string("the dive's filter steps cannot be read back: ") + e.what();
+    return true;
+  }
   if (smoothed.empty()) {
     response.success = false;
     response.message = "nothing to smooth yet";
@@ -1122,13 +1147,13 @@ void FusionRos::writeTracks() {
     return;
   }
   try {
+    const fu::FilterLog log = front_end_->filter().wholeLog();
     std::vector<fu::FilterState> filtered;
-    for (const fu::FilterStep& step : front_end_->filter().log().steps)
+    for (const fu::FilterStep& step : log.steps)
       filtered.push_back(fu::FilterState::from(step.stamp_s, step.x_posterior, step.P_posterior));
     if (!config_.track_csv.empty()) exocet_common::writeFileAtomically(config_.track_csv, trackCsv(filtered));
     if (!config_.smoothed_track_csv.empty())
-      exocet_common::writeFileAtomically(config_.smoothed_track_csv,
-                                         trackCsv(fu::smoothRts(front_end_->filter().log())));
+      exocet_common::writeFileAtomically(config_.smoothed_track_csv, trackCsv(fu::smoothRts(log)));
     ROS_INFO("fusion: wrote %zu states to %s %s", filtered.size(), config_.track_csv.c_str(),
              config_.smoothed_track_csv.c_str());
   } catch (const std::exception& e) {
@@ -1188,6 +1213,11 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
       status.add("loop key frames dropped (queue full)", loops.dropped);
       if (!loops.last_refusal.empty()) status.add("loop last refusal", loops.last_refusal);
       if (!loops.last_error.empty()) status.add("loop last error", loops.last_error);
+      status.add("loop images in memory", loops.images.in_memory);
+      status.add("loop images on disk", loops.images.on_disk);
+      status.add("loop image write failures", loops.images.write_failures);
+      status.add("loop images lost", loops.images.lost);
+      if (!loops.images.last_error.empty()) status.add("loop image last error", loops.images.last_error);
     }
   }
   status.add("images awaiting their motion", awaiting_motion_.size());
@@ -1200,6 +1230,12 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
         std::make_pair("invalid", &invalid_), std::make_pair("rejected inputs", &rejected_inputs_)})
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
+  if (config_.keep_smoother_log && !config_.smoother_log_file.empty()) {
+    status.add("filter steps written out", front_end_->filter().loggedToFile());
+    status.add("filter steps in memory", front_end_->filter().log().steps.size());
+    if (!front_end_->filter().logFileError().empty())
+      status.add("filter step file error", front_end_->filter().logFileError());
+  }
   status.add("started from", started_from_.empty() ? std::string("not started") : started_from_);
   if (!config_.state_file.empty()) {
     status.add("saved state", resume_note_);

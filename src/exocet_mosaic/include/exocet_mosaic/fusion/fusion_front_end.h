@@ -28,7 +28,10 @@ namespace fusion {
 
 struct FusionFrontEndConfig {
   FilterConfig filter;
-  bool keep_log = true;             ///< keep every filter step (RTS smoothing, track files)
+  bool keep_log = true;  ///< keep every filter step (RTS smoothing, track files)
+  /// With keep_log: the file the steps older than the filter's history window are written to
+  /// (NavigationFilter::setLogFile), so that memory does not grow with the dive; "": held in memory.
+  std::string log_file;
   double attitude_max_gap_s = 0.5;  ///< attitude samples further apart are not interpolated between (0, 60] s
   double altitude_max_gap_s = 1.0;  ///< altimeter samples further apart are not interpolated between (0, 600] s
   double history_window_s = 30.0;   ///< how long attitude and altitude samples are kept [1, 3600] s
@@ -161,7 +164,7 @@ class FusionFrontEnd {
   void reset();
 
  private:
-  static constexpr double kAttitudeWaitS = 2.0;  // how long a first navigation sample waits for the attitude
+  static constexpr double kAttitudeWaitS = 2.0;   // how long a first navigation sample waits for the attitude
   std::optional<double> first_unplaced_stamp_s_;  // the first one that could not be placed at the camera
   // Why the filter does not start from a navigation sample yet (the camera's place on the vehicle or the attitude).
   std::string waitingForLeverArm(bool mounts_known) const;

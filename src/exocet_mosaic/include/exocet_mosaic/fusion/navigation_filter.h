@@ -63,12 +63,14 @@
 
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "exocet_mosaic/fusion/filter_log.h"
+#include "exocet_mosaic/fusion/filter_step_file.h"
 #include "exocet_mosaic/fusion/metric_motion.h"
 
 namespace exocet_mosaic {
@@ -100,10 +102,10 @@ struct FilterConfig {
   double heading_drift_noise_rps_per_sqrt_s = 2e-5;  ///< bias instability (rad/s/sqrt(s), >= 0)
 
   // --- Dead reckoning ---
-  double dr_measurement_sigma_m = 0.01;    ///< white noise of one DR position, each axis (m, > 0)
-  double dr_offset_noise_m2_per_m = 1e-3;  ///< DR offset random walk per metre travelled (m^2/m, >= 0)
-  double dr_offset_noise_m2_per_s = 1e-6;  ///< DR offset random walk per second (m^2/s, >= 0)
-  double initial_dr_scale_sigma = 0.01;    ///< 1-sigma of the DR's velocity scale error at the start ([0, 0.5))
+  double dr_measurement_sigma_m = 0.01;     ///< white noise of one DR position, each axis (m, > 0)
+  double dr_offset_noise_m2_per_m = 1e-3;   ///< DR offset random walk per metre travelled (m^2/m, >= 0)
+  double dr_offset_noise_m2_per_s = 1e-6;   ///< DR offset random walk per second (m^2/s, >= 0)
+  double initial_dr_scale_sigma = 0.01;     ///< 1-sigma of the DR's velocity scale error at the start ([0, 0.5))
   double dr_scale_noise_per_sqrt_s = 1e-5;  ///< random walk of the DR's scale error (1/sqrt(s), >= 0)
   /// The DR's heading comes from the same gyro as the attitude used for the images (the usual ROV set-up, and the
   /// simulator's): its heading error moves the DR offset through psi (see the file comment).
@@ -193,6 +195,19 @@ class NavigationFilter {
   const FilterLog& log() const { return log_; }
   void setKeepLog(bool keep);
   bool keepLog() const { return keep_log_; }
+  /**
+   * @brief With a kept log, writes the steps that leave the history window to `path` (a FilterStepFile, created or
+   * truncated) instead of holding them: memory stays bounded however long the dive. "" holds them in memory.
+   * Steps a write fails on (disk full) stay in memory and are written with the next ones.
+   * @throws std::runtime_error when the file cannot be created
+   */
+  void setLogFile(const std::string& path);
+  /// Every step since initialize() when the log is kept: the written ones read back, then log(). A copy: for the
+  /// smoother and the track files. @throws std::runtime_error when the file cannot be read back
+  FilterLog wholeLog() const;
+  /// Steps written to the log file (0 without one), and its last write error ("" if none).
+  uint64_t loggedToFile() const;
+  std::string logFileError() const;
 
   /// Counters since initialize(), after re-processing (a fix first applied may be rejected on a rewind, and back).
   struct Counters {
@@ -243,7 +258,8 @@ class NavigationFilter {
   bool initialized_ = false;
   bool keep_log_ = true;
   FilterLog log_;
-  std::vector<Event> events_;  ///< within the history window, sorted by (stamp, kind, sequence)
+  std::unique_ptr<FilterStepFile> log_file_;  ///< the steps written out (setLogFile), or null
+  std::vector<Event> events_;                 ///< within the history window, sorted by (stamp, kind, sequence)
   uint64_t next_sequence_ = 0;
   double initial_stamp_s_ = 0.0;
   bool initial_dr_known_ = false;  ///< resume(): the offset was known at the first step

@@ -87,12 +87,20 @@ struct FusionNodeConfig {
   /// candidates whose footprints may overlap, verified by registration, added to the graph in a worker thread).
   bool loop_closure = false;
   std::string loop_image_topic = "/camera/image_raw/compressed";  ///< sensor_msgs/CompressedImage
+  /// With loop_closure: the folder of the key frames' images beyond the few kept in memory (graph::KeyFrameImageStore;
+  /// emptied of an earlier run's at start); empty: all in memory, which grows with the dive. Default
+  /// defaultLoopImageFolder() for the node.
+  std::string loop_image_folder;
   /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs
   double path_rate_hz = 1.0;                      ///< paths are republished at this rate (0, 100]
   int max_path_poses = 20000;                     ///< beyond, every other pose is dropped (bounded memory) [100, 1e7]
-  bool keep_smoother_log = true;           ///< keep the whole dive for the RTS smoother (memory grows with the dive)
+  bool keep_smoother_log = true;                  ///< keep the whole dive for the RTS smoother and the track files
+  /// With keep_smoother_log: the file the filter's older steps are written to as the dive goes (about 1.7 kB a
+  /// step), so that the node's memory does not grow with the dive; empty: held in memory. Default
+  /// defaultSmootherLogFile() for the node.
+  std::string smoother_log_file;
   std::string track_csv;                   ///< written at shutdown: the filtered track (empty: not written)
   std::string smoothed_track_csv;          ///< written at shutdown: the RTS-smoothed track (empty: not written)
   double max_position_sigma_m = 10.0;      ///< /diagnostics warns above this 1-sigma (0, 1e6] m
@@ -110,6 +118,10 @@ struct FusionNodeConfig {
 /// $ROS_HOME/exocet_fusion_state_<node>.json (~/.ros when ROS_HOME is unset), <node> the private namespace with its
 /// slashes as underscores: two fusions on one machine keep their own.
 std::string defaultFusionStateFile(const std::string& private_namespace);
+/// $ROS_HOME/exocet_loop_images_<node>/ (~/.ros when ROS_HOME is unset), <node> as in defaultFusionStateFile.
+std::string defaultLoopImageFolder(const std::string& private_namespace);
+/// $ROS_HOME/exocet_fusion_steps_<node>.bin (~/.ros when ROS_HOME is unset), <node> as in defaultFusionStateFile.
+std::string defaultSmootherLogFile(const std::string& private_namespace);
 
 /// @throws std::invalid_argument naming the parameter, its value and the allowed range.
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh);
