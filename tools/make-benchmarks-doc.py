@@ -520,20 +520,26 @@ BENCHMARKS = {
     },
     'web_map.json': {
         'title': 'Live web map (web_map_node)',
-        'command': 'devel/lib/exocet_web/bench_web_map --output-dir out/bench [--rate R] [--clients N]',
+        'command': 'devel/lib/exocet_web/bench_web_map --output-dir out/bench [--rate R] [--clients N] [--no-stress]',
         'measures': 'How fast a GeoTIFF tile written by the chain reaches the pages watching the live web map, what '
                     'cutting it into web tiles costs, and whether browsers watching slow the chain down.',
         'data': 'The sample out-and-back dive (`bags/sample_out_and_back.bag`: 435 PAL images, 87 s, four tiles of '
                 '150 images), replayed through `replay.launch web:=true`.',
         'method': [
-            'Two replays on a private ROS master: without any client, then with N lightweight clients (Python '
-            'threads in the benchmark process, each holding the /events stream as a page does and fetching every '
-            'web tile announced).',
-            'Latency: from the tile writer\'s Tile message (sent once the GeoTIFF is renamed into place) to a client '
-            'having fetched every web tile of that tile\'s "webtiles" event (status 200); median and max over tiles '
-            'and clients. CPU per web tile: web_map_node\'s user + system time over the web tiles it cut (all levels), '
-            'in the run without clients. Chain frames per second: image pairs registered (/mosaic/motion) per wall '
-            'second between the first and the last.',
+            'Three replays on a private ROS master: without any client; with N lightweight clients (Python threads '
+            'in the benchmark process, each holding the /events stream as a page does and fetching, of each tile '
+            'announced, what a page following the vehicle shows: its web tiles of the finest zoom, where web_map.js '
+            'follows, inside a 1280 x 800 window centred on the vehicle\'s last position; a tile version with none '
+            'there is counted apart, `tile_versions_out_of_view`); with N clients fetching every web tile announced, '
+            'every level (`stress_all_levels`: more than any page asks for).',
+            'Latency, for each tile version written (first versions and re-renderings): from the tile writer\'s Tile '
+            'message (sent once the GeoTIFF is renamed into place) to a client having received the first "webtiles" '
+            'event of that tile at that version or a later one (the node cuts only the newest of versions queued '
+            'together) and fetched the web tiles it asks for (status 200); median, p95 and max over versions and '
+            'clients; failed requests by HTTP status or, without an answer, by error. CPU per web tile: '
+            'web_map_node\'s user + system time over the web tiles it cut (all levels), in the run without clients. '
+            'Chain frames per second: image pairs registered (/mosaic/motion) per wall second between the first and '
+            'the last.',
         ],
         'targets': ['A new tile on the pages within 2 s of being written; the chain\'s frames per second the same '
                     'with 20 clients as with none (within the run-to-run noise).'],
@@ -548,8 +554,23 @@ BENCHMARKS = {
             ('geotiff_tiles_cut', 'GeoTIFF tiles cut'),
             ('client_requests', 'requests of the clients'),
             ('client_errors', 'failed requests of the clients'),
+            ('client_error_statuses.*', 'failed requests of the clients by HTTP status, or the error that left no '
+             'answer'),
+            ('tile_versions_out_of_view', 'tile versions x clients with no web tile in the window of a page '
+             'following the vehicle'),
+            ('tile_versions_written', 'tile versions written during the replay (first versions and re-renderings)'),
+            ('tile_versions_never_served', 'tile versions x clients never fetched whole (a request failed, or the '
+             'replay ended first)'),
+            ('stress_all_levels.tile_versions_never_served', 'clients fetching every level: tile versions x clients '
+             'never fetched whole'),
+            ('stress_all_levels.tile_written_to_served_ms.*', 'clients fetching every level: GeoTIFF written -> all '
+             'its web tiles fetched by a client (ms)'),
+            ('stress_all_levels.tile_written_to_announced_ms.*', 'clients fetching every level: GeoTIFF written -> '
+             'its announcement received by a client (ms)'),
+            ('stress_all_levels.chain_fps', 'clients fetching every level: image pairs registered per second'),
+            ('stress_all_levels.client_*', 'clients fetching every level: their requests, failed requests'),
             ('rate', 'replay speed'),
-            ('clients', 'clients in the second replay'),
+            ('clients', 'clients in the second and third replays'),
         ],
     },
     'servo.json': {
@@ -825,6 +846,58 @@ BENCHMARKS = {
             ('vent_*seconds', 'vent: time (s)'),
         ],
     },
+    'soak.json': {
+        'title': 'Soak: an hour-long dive through the live chain',
+        'command': 'make soak (tools/run-soak.sh: devel/lib/exocet_mosaic/soak_dive --output-dir out/bench [--rate R] '
+                   '[--attempts N] [--no-web])',
+        'measures': 'Whether the live chain holds a dive of an hour and more: frames dropped at the highest replay '
+                    'rate, each node\'s resident memory over the dive (what grows with the dive is bounded or '
+                    'written out), CPU per frame from the start to the end, tiles written and their landmark error at '
+                    'the start and at the end.',
+        'data': 'config/dives/soak_pal.yaml rendered once into out/bench/cache/soak_pal.bag: PAL (720x576) at 10 '
+                'frames/s, a 25-line lawnmower of 72 m lines 1.6 m apart at 2.5 m altitude over a flat seabed (each '
+                'line overlaps the one before: the pose graph finds loops all dive long), USBL 0.5 m at 1 Hz, 40 '
+                'checker landmarks along the track.',
+        'method': [
+            'The whole chain of replay.launch (registration, fusion with its pose graph and live loop closure, tile '
+            'writer, web map) on a private ROS master, the bag played at the rate tried first (16x), then slower '
+            'after a drop. Frames dropped as bench_tiles counts them.',
+            'Every 2 s of wall time each node\'s resident memory (VmRSS) and CPU time (user + system) are sampled '
+            'against the dive time the registration has reached. Memory slope: least-squares line through the '
+            'samples after the warm-up (10 minutes of dive), in MB per 10 minutes of dive. CPU per frame: the CPU '
+            'time over the frames registered, per 10-minute stretch of the dive.',
+            'Landmarks: the checker targets found in the tiles made of the first and of the last 10 minutes of the '
+            'dive, their error against the simulator\'s truth.',
+        ],
+        'targets': ['No frame dropped; each node\'s memory slope after the warm-up under 1 MB per 10 minutes of '
+                    'dive (issue 22).'],
+        'omit': ['attempts', 'nodes.*.rss_mb_series', 'nodes.*.cpu_ms_per_frame_by_stretch', 'registration_lag_s',
+                 'fusion_lag_s', 'tile_writer_*'],
+        'groups': {'nodes': 'per node'},
+        'figures': [
+            ('dive_hours', 'length of the dive (h)'),
+            ('frames', 'images in the bag'),
+            ('rate', 'replay rate (times real time)'),
+            ('rate_no_drop', 'replay rate reached with no frame dropped'),
+            ('frames_dropped*', 'frames dropped'),
+            ('chain_fps', 'frames per second through the chain'),
+            ('rss_slope_mb_per_10min_max', 'largest memory slope of a node after the warm-up (MB per 10 min of dive)'),
+            ('rss_slope_mb_per_10min', 'memory slope after the warm-up (MB per 10 min of dive)'),
+            ('rss_mb_at_warm_up_end', 'resident memory at the end of the warm-up (MB)'),
+            ('rss_mb_at_end', 'resident memory at the end of the dive (MB)'),
+            ('rss_mb_max', 'peak resident memory (MB)'),
+            ('cpu_ms_per_frame_first_stretch', 'CPU per frame, first 10 minutes of dive (ms)'),
+            ('cpu_ms_per_frame_last_stretch', 'CPU per frame, last 10 minutes of dive (ms)'),
+            ('peak_rss_mb_*', 'peak resident memory (MB)'),
+            ('cpu_s_*', 'CPU time over the replay (s)'),
+            ('tiles', 'GeoTIFF tiles written'),
+            ('landmark_error_start_*', 'landmark error in the tiles of the first 10 minutes (m)'),
+            ('landmark_error_end_*', 'landmark error in the tiles of the last 10 minutes (m)'),
+            ('landmark_error_p95_m', 'landmark error p95, whole dive (m)'),
+            ('landmarks_*', 'landmarks found / expected'),
+            ('replay_wall_s', 'wall time of the replay (s)'),
+        ],
+    },
     'reliability.json': {
         'title': 'Reliability: faults survived',
         'command': 'rostest exocet_system_tests node_kill_replay.test; the same for bad_recordings_replay.test and '
@@ -853,6 +926,13 @@ BENCHMARKS = {
             ('disk_full_survived', 'disk-full episodes survived (of 2)'),
             ('bad_recordings_tried', 'bad recordings replayed'),
             ('bad_recordings_survived', 'of them, survived'),
+            ('soak_dive_hours', 'make soak: hours of dive replayed'),
+            ('soak_rss_slope_mb_per_10min_max', 'make soak: largest memory slope of a node (MB per 10 min of dive)'),
+            ('soak_rate_no_drop', 'make soak: replay rate with no frame dropped'),
+            ('soak_frames_dropped', 'make soak: frames dropped'),
+            ('multihost_frames_delivered_fraction', 'tools/multihost-test.sh: frames delivered over the degraded link'),
+            ('multihost_recovery_s', 'tools/multihost-test.sh: from the link back to the first frame received '
+             'after it (s)'),
         ],
     },
 }
