@@ -860,7 +860,7 @@ BENCHMARKS = {
                 'checker landmarks along the track.',
         'method': [
             'The whole chain of replay.launch (registration, fusion with its pose graph and live loop closure, tile '
-            'writer, web map) on a private ROS master, the bag played at the rate tried first (16x), then slower '
+            'writer, web map) on a private ROS master, the bag played at the rate tried first (8x), then slower '
             'after a drop. Frames dropped as bench_tiles counts them.',
             'Every 2 s of wall time each node\'s resident memory (VmRSS) and CPU time (user + system) are sampled '
             'against the dive time the registration has reached. Memory slope: least-squares line through the '

@@ -257,14 +257,29 @@ class FusionNodeTest(unittest.TestCase):
         self.assertEqual(self.diag.get('initialised'), 'True')
 
     def test_2_clock_jump_resets(self):
+        # One input from 500 s before the newest is late (a starved node upstream): dropped, no reset. A stream of
+        # them, none in order, is the dive replayed again without its clock: a reset once it lasts 3 s.
         resets_before = self.diag.count('resets')
+        late_before = self.diag.count('late inputs dropped')
         odom = Odometry()
-        odom.header.stamp = rospy.Time.from_sec(T0 - 500.0)  # a bag replayed again
         odom.header.frame_id = 'utm'
         odom.pose.pose.position.x, odom.pose.pose.position.y = self.truth.base(0.0)
         odom.pose.pose.orientation.w = 1.0
         odom.pose.covariance[0] = odom.pose.covariance[7] = 0.01
+        odom.header.stamp = rospy.Time.from_sec(T0 - 500.0)
         self.pub_odom.publish(odom)
+        deadline = time.time() + 5.0
+        while time.time() < deadline and self.diag.count('late inputs dropped') <= late_before:
+            time.sleep(0.2)
+        self.assertGreater(self.diag.count('late inputs dropped'), late_before, 'one late input is dropped')
+        self.assertEqual(self.diag.count('resets'), resets_before, 'one late input does not reset the filter')
+        start = time.time()
+        k = 0
+        while time.time() - start < 6.0 and self.diag.count('resets') <= resets_before:
+            k += 1
+            odom.header.stamp = rospy.Time.from_sec(T0 - 500.0 + 0.1 * k)  # a bag replayed again, no clock
+            self.pub_odom.publish(odom)
+            time.sleep(0.1)
         deadline = time.time() + 5.0
         while time.time() < deadline and self.diag.count('resets') <= resets_before:
             time.sleep(0.2)

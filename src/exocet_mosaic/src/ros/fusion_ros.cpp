@@ -161,11 +161,29 @@ bool FusionRos::admitStamp(const ros::Time& stamp, const std::string& what, bool
   // belong to the dive), before anything reaches the filter.
   if (saved_state_ && what != "fix") maybeResume(t);
   if (have_stamp_ && t < newest_stamp_s_ - config_.clock_jump_s) {
+    // A new dive when the clock went back with the stamps (a bag played again with its clock), or when inputs keep
+    // coming from before the newest one with none in order for kLateInputPatience_s (a source restarted without a
+    // clock). Otherwise this input is late (its node starved of CPU, a replay faster than the chain): dropped, and
+    // the dive's filter, graph and tracks stay.
+    const double clock_s = ros::Time::now().toSec();
+    const bool clock_back = clock_s > 0.0 && clock_s < newest_stamp_s_ - config_.clock_jump_s;
+    const ros::WallTime wall_now = ros::WallTime::now();
+    if (!late_since_) late_since_ = wall_now;
     std::ostringstream why;
     why << what << " stamped " << std::fixed << std::setprecision(3) << newest_stamp_s_ - t
-        << " s before the newest input (more than ~clock_jump_s = " << config_.clock_jump_s
-        << " s): the clock jumped or the bag restarted";
+        << " s before the newest input (more than ~clock_jump_s = " << config_.clock_jump_s << " s)";
+    if (!clock_back && (wall_now - *late_since_).toSec() < kLateInputPatience_s) {
+      ++late_inputs_;
+      rejectInput(what, why.str() + ": late, dropped");
+      return false;
+    }
+    why << (clock_back ? ": the clock jumped back (a bag played again?)"
+                       : ": inputs from before the newest for " + std::to_string(kLateInputPatience_s) +
+                             " s (a source restarted?)");
+    late_since_.reset();
     resetAll(why.str());
+  } else {
+    late_since_.reset();
   }
   (void)late_allowed;
   if (!have_stamp_ || t > newest_stamp_s_) newest_stamp_s_ = t;
@@ -1230,6 +1248,7 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
         std::make_pair("invalid", &invalid_), std::make_pair("rejected inputs", &rejected_inputs_)})
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
+  status.add("late inputs dropped", late_inputs_);
   if (config_.keep_smoother_log && !config_.smoother_log_file.empty()) {
     status.add("filter steps written out", front_end_->filter().loggedToFile());
     status.add("filter steps in memory", front_end_->filter().log().steps.size());

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <numeric>
 #include <stdexcept>
 
 #include <sys/resource.h>
@@ -954,14 +955,16 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   };
   std::vector<tiles::TileRecord> due;
   std::vector<bool> keep_placements;
+  std::vector<double> urgency;  ///< how far past its thresholds a due tile is (the largest of the two ratios)
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     for (const auto& [index, record] : records_) {
       if (revision_pending_.count(index)) continue;
-      bool relit = false;
+      double largest_gain_change = 0.0;
       if (gains)
         for (const tiles::RecordedImage& image : record.images)
-          relit = relit || gain_change(image) > config_.image_gain_redraw_change;
+          largest_gain_change = std::max(largest_gain_change, gain_change(image));
+      const bool relit = largest_gain_change > config_.image_gain_redraw_change;
       // Drawing it failed with these corrections: tried again with the next ones, or new gains (solved only when
       // images were added).
       const auto failed = revision_failed_at_.find(index);
@@ -974,11 +977,21 @@ int TileWriterRos::rerenderDue(bool every_tile) {
         // Without the graph, or not moved by it: drawn where it is (placementsAt() would fit it to the navigation
         // again, without the tie to its neighbours the composer gave it).
         keep_placements.push_back(track.empty() || (!moved && !every_tile));
+        urgency.push_back(std::max(moved_m / (config_.rerender_threshold_gsd * record.gsd_m),
+                                   largest_gain_change / config_.image_gain_redraw_change));
         if (relit && !every_tile && !moved) ++tiles_redrawn_for_gains_;
       }
     }
   }
   if (due.empty()) return 0;
+  // The tiles most out of place (or most out of tone) first; each drawn only when the writer holds fewer than
+  // kMaxQueuedRevisions drawn tiles, as a drawn tile is a whole raster (tens of MB) and after a loop closure or a new
+  // gain solution every tile of the dive may be due at once. The periodic pass stops when the node stops; the rest is
+  // due again at the next pass (or at the last one, which draws every tile).
+  std::vector<std::size_t> order(due.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  if (!every_tile)
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return urgency[a] > urgency[b]; });
   if (gains)
     for (tiles::TileRecord& record : due)
       for (tiles::RecordedImage& image : record.images) {
@@ -991,7 +1004,8 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   render.multiband_bands = config_.composer.multiband_bands;
   const auto prepare = [lighting](const cv::Mat& image) { return lighting->correct(image); };
   int queued = 0;
-  for (std::size_t k = 0; k < due.size(); ++k) {
+  for (const std::size_t k : order) {
+    if (!waitForRevisionRoom(!every_tile)) break;
     const tiles::TileRecord& record = due[k];
     const auto start = std::chrono::steady_clock::now();
     std::vector<cv::Matx33d> current;
@@ -1021,6 +1035,25 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     ++queued;
   }
   return queued;
+}
+
+bool TileWriterRos::waitForRevisionRoom(bool interruptible) {
+  const auto queued_revisions = [this]() {
+    return std::count_if(write_queue_.begin(), write_queue_.end(),
+                         [](const PendingTile& p) { return p.revision.has_value(); });
+  };
+  while (true) {
+    {
+      std::unique_lock<std::mutex> lock(write_mutex_);
+      if (write_cv_.wait_for(lock, std::chrono::milliseconds(200),
+                             [&]() { return stop_writer_ || queued_revisions() < kMaxQueuedRevisions; }))
+        return !stop_writer_;
+    }
+    if (interruptible) {
+      std::lock_guard<std::mutex> lock(rerender_mutex_);
+      if (stop_rerender_) return false;
+    }
+  }
 }
 
 std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solveImageGains(

@@ -47,9 +47,16 @@ struct TileWriteError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// GDAL's block cache unless GDAL_CACHEMAX says otherwise: its default, 5 % of the machine's memory, fills over a long
+/// dive and reads as a node that grows; a tile is written once and read back once for its overviews.
+constexpr GIntBig kGdalCacheBytes = GIntBig(128) << 20;
+
 void registerGdalOnce() {
   static std::once_flag once;
-  std::call_once(once, [] { GDALAllRegister(); });
+  std::call_once(once, [] {
+    GDALAllRegister();
+    if (CPLGetConfigOption("GDAL_CACHEMAX", nullptr) == nullptr) GDALSetCacheMax64(kGdalCacheBytes);
+  });
 }
 
 /// Collects the GDAL errors raised in this thread while it lives (instead of GDAL printing them to stderr), so that

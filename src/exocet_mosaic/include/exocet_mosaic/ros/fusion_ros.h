@@ -213,6 +213,12 @@ class FusionRos {
   // Tracks.
   double newest_stamp_s_ = 0.0;
   bool have_stamp_ = false;
+  /// Wall time since which every input came from more than ~clock_jump_s before the newest (none in order since).
+  std::optional<ros::WallTime> late_since_;
+  std::uint64_t late_inputs_ = 0;  ///< inputs dropped as late (the clock had not gone back)
+  /// Wall seconds of inputs all from before the newest, none in order, that make a new dive (a source restarted
+  /// without a clock); fewer: late inputs, dropped.
+  static constexpr double kLateInputPatience_s = 3.0;
   nav_msgs::Path fused_path_, nav_path_, image_path_;
   ros::Time last_odometry_stamp_;
 

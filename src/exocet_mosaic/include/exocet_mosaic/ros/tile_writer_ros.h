@@ -115,6 +115,10 @@ class TileWriterRos {
   /// Draws again the written tiles the corrections moved (every tile: all of them, with the lighting field as it is
   /// now) and queues them for the writer; returns how many.
   int rerenderDue(bool every_tile = false);
+  /// Waits until the writer holds fewer than kMaxQueuedRevisions drawn tiles. @return false when the writer stops,
+  /// or (interruptible) when the rerender thread is asked to stop.
+  bool waitForRevisionRoom(bool interruptible);
+  static constexpr long kMaxQueuedRevisions = 2;
   /// Rerender thread: solves the images' gains when images were added since the last solve (or `always`) at their
   /// current placements and the lighting given; @return the new gains per image file, nullopt if not solved.
   std::optional<std::map<std::string, std::array<double, 3>>> solveImageGains(
@@ -208,8 +212,8 @@ class TileWriterRos {
   std::unique_ptr<tiles::GeoTiffTileWriter> writer_;
   std::optional<tiles::TileWriterConfig> files_update_;  ///< from dynamic_reconfigure, for the next write
   std::unique_ptr<tiles::TileNotifier> notifier_;
-  compose::TileGainCompensator gains_;  ///< writer thread only
-  std::string last_gain_note_;         ///< the last tile's gain correction, for /diagnostics (write_mutex_)
+  compose::TileGainCompensator gains_;       ///< writer thread only
+  std::string last_gain_note_;               ///< the last tile's gain correction, for /diagnostics (write_mutex_)
   std::vector<tiles::WrittenTile> written_;  ///< for the footprints (bounded)
   std::vector<std::array<Eigen::Vector2d, 4>> written_outlines_;
 
@@ -221,8 +225,8 @@ class TileWriterRos {
   std::int64_t corrections_received_ = 0, corrections_saved_ = 0;
   std::map<int, Eigen::Vector2d> used_corrections_;  ///< frame index -> correction added to its pose (compose thread)
   std::map<int, tiles::TileRecord> records_;         ///< written tiles by index (write_mutex_)
-  std::set<int> revision_pending_;                    ///< tiles drawn again, not written yet (write_mutex_)
-  std::map<int, std::int64_t> revision_failed_at_;    ///< tile -> corrections_received_ when drawing it failed
+  std::set<int> revision_pending_;                   ///< tiles drawn again, not written yet (write_mutex_)
+  std::map<int, std::int64_t> revision_failed_at_;   ///< tile -> corrections_received_ when drawing it failed
   std::mutex rerender_mutex_;
   std::condition_variable rerender_cv_;
   bool stop_rerender_ = false;
@@ -231,19 +235,19 @@ class TileWriterRos {
   double last_rerender_ms_ = 0, max_tile_move_m_ = 0;
   std::string last_rerender_problem_;
   bool tiles_changed_since_adjustment_ = false;  ///< write_mutex_
-  bool vrt_stale_ = false;                        ///< writer thread
+  bool vrt_stale_ = false;                       ///< writer thread
   ros::WallTime last_vrt_wall_;
   std::int64_t tile_adjustments_ = 0;
   double last_adjustment_pair_max_px_ = 0;
   bool redraws_ = false;  ///< the rerender thread runs (graph corrections, or image gains)
   // Gains of the kept images.
   std::mutex image_gains_mutex_;
-  compose::ImageGains image_gains_;        ///< levels of the kept images (image_gains_mutex_)
-  std::int64_t image_levels_added_ = 0;    ///< (image_gains_mutex_)
-  std::int64_t image_levels_solved_ = -1;  ///< rerender thread
+  compose::ImageGains image_gains_;                          ///< levels of the kept images (image_gains_mutex_)
+  std::int64_t image_levels_added_ = 0;                      ///< (image_gains_mutex_)
+  std::int64_t image_levels_solved_ = -1;                    ///< rerender thread
   std::map<std::string, std::array<double, 3>> image_gain_;  ///< last solution by image file (rerender thread)
-  compose::ImageGainSolution last_image_gains_;               ///< its figures, gains left out (write_mutex_)
-  double last_image_gain_ms_ = 0;                             ///< (write_mutex_)
+  compose::ImageGainSolution last_image_gains_;              ///< its figures, gains left out (write_mutex_)
+  double last_image_gain_ms_ = 0;                            ///< (write_mutex_)
   std::int64_t image_gain_solves_ = 0, tiles_redrawn_for_gains_ = 0;  ///< (write_mutex_)
 
   // A run carried over restarts.
