@@ -27,6 +27,9 @@
   let levels = new Map();           // z -> Set of "x,y": the tiles at coarser levels, from the finest
   let baseRev = 0;                  // event id of the snapshot
   const rev = new Map();            // "z/x/y" -> event id of its last change
+  // The node's run ("<run>-<n>" ids) in the tile URLs too: a restarted node counts from 0 again, and the browser
+  // would show an image it holds for an URL of the killed run.
+  let run = '';
 
   function levelSet(z) {
     if (z === zoom.max) return finest;
@@ -53,7 +56,8 @@
     getTileUrl: function (coords) {
       if (!tileExists(coords.z, coords.x, coords.y)) return BLANK;
       const key = coords.z + '/' + coords.x + '/' + coords.y;
-      return 'tiles/' + key + '.png' + (LIVE ? '?r=' + (rev.get(key) || baseRev) : '');
+      if (!LIVE) return 'tiles/' + key + '.png';
+      return 'tiles/' + key + '.png?r=' + (rev.get(key) || baseRev) + (run ? '&run=' + encodeURIComponent(run) : '');
     },
   });
   const mosaic = new MosaicLayer('', { tileSize: 256, maxZoom: 28, minZoom: 0, keepBuffer: 1, updateWhenZooming: false });
@@ -283,11 +287,16 @@
     const m = /-(\d+)$/.exec(id || '');
     return m ? Number(m[1]) : 0;
   }
+  function runOf(id) {
+    const m = /^(.+)-\d+$/.exec(id || '');
+    return m ? m[1] : '';
+  }
   let fitted = false;
   function applyState(s) {
     diveName = s.dive_name || '';
     datum = s.datum;
     baseRev = eventNumber(s.event_id);
+    run = runOf(s.event_id);
     rev.clear();
     setZoomRange(s.zoom || { min: -1, max: -1 });
     finest = new Set();
@@ -368,16 +377,33 @@
     const handle = (name, fn) => source.addEventListener(name, function (e) {
       stats.events += 1;
       stats.lastEventId = e.lastEventId;
-      try { fn(JSON.parse(e.data), eventNumber(e.lastEventId)); } catch (err) { console.error(name, err); }
+      try {
+        fn(JSON.parse(e.data), eventNumber(e.lastEventId), e.lastEventId);
+      } catch (err) {
+        console.error(name, err);
+      }
     });
     handle('tile', onTile);
     handle('webtiles', onWebTiles);
     handle('track', onTrack);
     handle('usbl', d => { for (const f of d.fixes) addUsbl(f); });
     handle('datum', d => { datum = d; });
-    handle('reset', () => { stats.resets += 1; loadState(false); });
+    handle('reset', (d, n, id) => {
+      stats.resets += 1;
+      // Until the state comes, a re-cut web tile is fetched under the new run's numbers.
+      run = runOf(id);
+      baseRev = n;
+      rev.clear();
+      loadState(false);
+    });
     source.onopen = () => { stats.connected = true; showTitle(); };
-    source.onerror = () => { stats.connected = false; showTitle(); };  // the browser reconnects by itself
+    source.onerror = () => {
+      stats.connected = false;
+      showTitle();
+      // The browser reconnects by itself when the node is down (a restart), but gives up on an HTTP error (503 when
+      // the node is busy): then a fresh state and a new stream.
+      if (source.readyState === EventSource.CLOSED) setTimeout(() => loadState(true), 2000);
+    };
   }
 
   function loadState(thenListen) {

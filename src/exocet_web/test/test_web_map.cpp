@@ -1,5 +1,6 @@
 // The web map's site folder: the page and state files written, the events announced, a restart that cuts only what
-// changed, a GeoTIFF that cannot be read counted and skipped, the exports at shutdown.
+// changed, a GeoTIFF that cannot be read counted and skipped, the exports at shutdown, the GeoTIFFs found in the tiles
+// folder without a message (a restarted node's missed ones) and those left out at start staying out.
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -172,5 +173,66 @@ TEST(WebMap, AGeoTiffThatCannotBeReadIsCountedAndTheMapGoesOn) {
   EXPECT_EQ(map.stats().geotiffs_cut, 1u);
   EXPECT_EQ(map.stats().errors, 1u);
   EXPECT_GT(map.stats().web_tiles, 0);
+  map.shutdown();
+}
+
+TEST(WebMap, FindsTheGeoTiffsWrittenWithoutAMessage) {
+  TempDir dir;
+  std::filesystem::create_directories(dir.file("tiles"));
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0000.tif"), tileAt(0.0)));
+  ew::site::WebMap map(configFor(dir));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);  // not started: nothing
+  map.start();
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);  // cut at start already
+
+  // Written while the node was down or not yet subscribed: no message. Just written, its message may be on the way.
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0001.tif"), tileAt(1.0)));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(std::chrono::seconds(600)), 0);
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 1);
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);
+  // With its message: not queued a second time by a look at the folder.
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0002.tif"), tileAt(2.0)));
+  map.enqueueGeoTiff(dir.file("tiles/tile_0002.tif"));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  // A tile drawn again without its message: the new version.
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0001_v2.tif"), tileAt(1.5)));
+  std::filesystem::remove(dir.file("tiles/tile_0001.tif"));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 1);
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  // One that cannot be read: one error, not one per look.
+  std::ofstream(dir.file("tiles/tile_0003.tif")) << "truncated";
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 1);
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);
+  EXPECT_EQ(map.stats().errors, 1u);
+
+  EXPECT_EQ(map.stats().geotiffs_cut, 4u);
+  const nlohmann::json state = nlohmann::json::parse(map.snapshotJson());
+  ASSERT_EQ(state["tiles"].size(), 3u);
+  EXPECT_EQ(state["tiles"][1]["key"], "tile_0001");
+  EXPECT_EQ(state["tiles"][1]["version"], 2);
+  map.shutdown();
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0004.tif"), tileAt(3.0)));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);  // shut down: nothing
+}
+
+TEST(WebMap, TheGeoTiffsLeftOutAtStartStayOut) {
+  TempDir dir;
+  std::filesystem::create_directories(dir.file("tiles"));
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0000.tif"), tileAt(0.0)));
+  ew::site::WebMapConfig config = configFor(dir);
+  config.load_existing = false;
+  ew::site::WebMap map(config);
+  map.start();
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 0);
+  ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0001.tif"), tileAt(1.0)));
+  EXPECT_EQ(map.queueUnseenGeoTiffs(), 1);
+  ASSERT_TRUE(map.waitIdle(kPatience));
+  const nlohmann::json state = nlohmann::json::parse(map.snapshotJson());
+  ASSERT_EQ(state["tiles"].size(), 1u);
+  EXPECT_EQ(state["tiles"][0]["key"], "tile_0001");
   map.shutdown();
 }

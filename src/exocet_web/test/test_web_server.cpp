@@ -1,5 +1,6 @@
 // The web map's HTTP server through real connections on loopback (an ephemeral port): files, status codes, the
-// read-only rule, the limit on clients, the live events and their resumption, a client leaving mid-stream.
+// read-only rule, the limit on clients, the live events and their resumption, a client leaving mid-stream, a restart
+// on the same port.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -10,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <string>
 #include <thread>
 
@@ -286,6 +288,38 @@ TEST(WebServer, AClientLeavingMidStreamLeavesTheOthersServed) {
   ASSERT_TRUE(staying.readUntil("{\"still\":1}"));
   server.stop();
   EXPECT_EQ(server.stats().event_streams, 0);
+}
+
+TEST(WebServer, ARestartListensOnTheSamePortAtOnceAndThePageStartsOver) {
+  Site site;
+  es::EventStream events;
+  auto first = std::make_unique<es::WebServer>(loopback(), site.root(), &events, [] { return std::string("{}"); });
+  first->start();
+  const int port = first->port();
+  // A page watching, and a request the server closed first: its side of that connection is left in TIME_WAIT.
+  Connection page(port);
+  page.send("GET /events HTTP/1.1\r\nHost: x\r\n\r\n");
+  ASSERT_TRUE(page.readUntil("exocet web map"));
+  events.publish("tile", "{\"index\":1}");
+  ASSERT_TRUE(page.readUntil("{\"index\":1}"));
+  EXPECT_EQ(request(port, "GET", "/index.html").status, 200);
+  first->stop();
+  first.reset();
+
+  // The node started again (respawn): the same port, bound at once, while the page has not closed its connection.
+  es::EventStream again_events;
+  es::ServerConfig same = loopback();
+  same.port = port;
+  es::WebServer second(same, site.root(), &again_events, [] { return std::string("{}"); });
+  ASSERT_NO_THROW(second.start());
+  EXPECT_EQ(second.port(), port);
+  EXPECT_EQ(request(port, "GET", "/index.html").status, 200);
+  // The browser reconnects with the last id it got, of the killed run: it is told to start over from /state.json.
+  Connection reconnected(port);
+  reconnected.send("GET /events HTTP/1.1\r\nHost: x\r\nLast-Event-ID: " + events.idText(1) + "\r\n\r\n");
+  ASSERT_TRUE(reconnected.readUntil("event: reset"));
+  EXPECT_NE(reconnected.received().find("id: " + again_events.idText(0)), std::string::npos);
+  second.stop();
 }
 
 TEST(WebServer, StartFailuresNameTheAddress) {

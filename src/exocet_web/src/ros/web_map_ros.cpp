@@ -1,5 +1,6 @@
 #include "exocet_web/ros/web_map_ros.h"
 
+#include <chrono>
 #include <cmath>
 
 namespace exocet_web {
@@ -8,6 +9,10 @@ namespace {
 
 constexpr size_t kMaxPositionsWaitingForDatum = 10000;
 constexpr double kDegPerRad = 180.0 / M_PI;
+// A listing of the tiles folder: cheap, and a missed tile shows within this.
+constexpr double kFolderLookPeriod_s = 2.0;
+// A GeoTIFF younger than this may have its message still on the way: left for the next look.
+constexpr std::chrono::milliseconds kMessageGrace(1000);
 
 }  // namespace
 
@@ -54,6 +59,8 @@ WebMapRos::~WebMapRos() {
   timer_.stop();
   if (server_) server_->stop();
   if (map_) {
+    // The last tile's message may still be on its way when a replay's launch stops the node.
+    map_->queueUnseenGeoTiffs();
     const auto stats = map_->stats();
     ROS_INFO("web map: cutting the %d GeoTIFF tiles still queued, writing the site", stats.queue_length);
     const std::string errors = map_->shutdown();
@@ -161,6 +168,17 @@ void WebMapRos::onImu(const sensor_msgs::ImuConstPtr& msg) {
 
 void WebMapRos::onTimer(const ros::WallTimerEvent&) {
   map_->flushVehicleEvents();
+  if ((ros::WallTime::now() - last_folder_look_).toSec() >= kFolderLookPeriod_s) {
+    last_folder_look_ = ros::WallTime::now();
+    const int found = map_->queueUnseenGeoTiffs(kMessageGrace);
+    if (found > 0) {
+      tiles_found_without_message_ += found;
+      ROS_INFO_THROTTLE(10.0,
+                        "web map: %d GeoTIFF tiles of %s came without a tile message (written while this node "
+                        "was down or not yet connected): queued",
+                        found, config_.site.tiles_dir.c_str());
+    }
+  }
   // Wall time: a replay's sim clock may run fast, stop or go back.
   if ((ros::WallTime::now() - last_diagnostics_).toSec() >= 1.0) {
     last_diagnostics_ = ros::WallTime::now();
@@ -188,6 +206,7 @@ void WebMapRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   status.add("requests refused (400, 403, 405)", w.refused);
   status.add("requests not found (404)", w.not_found);
   status.add("tile messages received", tiles_received_);
+  status.add("GeoTIFF tiles found without a message", tiles_found_without_message_);
   status.add("GeoTIFF tiles cut", s.geotiffs_cut);
   status.add("web tiles cut", s.web_tiles_written);
   status.add("web tiles on disk", s.web_tiles);

@@ -1,6 +1,7 @@
 #include "exocet_web/site/web_map.h"
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
@@ -120,7 +121,17 @@ void WebMap::start() {
   const std::string assets_error = writeSiteAssets(config_.site_dir, config_.leaflet_dir);
   if (!assets_error.empty()) throw std::runtime_error("web map: " + assets_error);
   std::vector<std::string> to_cut;
-  if (config_.load_existing && !config_.tiles_dir.empty()) adoptPreviousRun(&to_cut);
+  if (config_.load_existing && !config_.tiles_dir.empty()) {
+    adoptPreviousRun(&to_cut);
+  } else if (!config_.tiles_dir.empty()) {
+    // Left out on purpose: queueUnseenGeoTiffs() must not cut them either.
+    for (const auto& path : tiles::listSourceTiles(config_.tiles_dir)) {
+      std::string key;
+      int index = 0, version = 0;
+      if (tiles::parseTileFileName(fs::path(path).filename().string(), &key, &index, &version))
+        markSeenLocked(key, version);
+    }
+  }
   loadTrack();
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -167,9 +178,14 @@ void WebMap::adoptPreviousRun(std::vector<std::string>* to_cut) {
     tiles::SourceTile source;
     const std::string error = tiles::readSourceTile(path, &source);
     if (!error.empty()) {
+      std::string key;
+      int index = 0, version = 0;
+      if (tiles::parseTileFileName(fs::path(path).filename().string(), &key, &index, &version))
+        markSeenLocked(key, version);  // counted once, not at every look at the folder
       noteError("geotiff", error);
       continue;
     }
+    markSeenLocked(source.key, source.version);
     present.insert(source.key);
     readable.push_back(path);
     const auto it = previous.find(source.key);
@@ -276,7 +292,9 @@ void WebMap::queueLocked(const std::string& path) {
   job.path = path;
   job.queued = Clock::now();
   int index = 0;
-  if (!tiles::parseTileFileName(fs::path(path).filename().string(), &job.key, &index, &job.version))
+  if (tiles::parseTileFileName(fs::path(path).filename().string(), &job.key, &index, &job.version))
+    markSeenLocked(job.key, job.version);
+  else
     job.key = path;  // cut anyway: readSourceTile says what is wrong
   // A newer version of a tile still queued replaces it; the older message's time is kept for the latency.
   for (Job& queued : queue_) {
@@ -290,6 +308,43 @@ void WebMap::queueLocked(const std::string& path) {
   }
   queue_.push_back(job);
   stats_.queue_length = static_cast<int>(queue_.size());
+}
+
+void WebMap::markSeenLocked(const std::string& key, int version) {
+  int& seen = versions_seen_[key];
+  seen = std::max(seen, version);
+}
+
+int WebMap::queueUnseenGeoTiffs(std::chrono::milliseconds min_age) {
+  if (config_.tiles_dir.empty()) return 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!started_ || stopping_) return 0;
+  }
+  std::string list_error;
+  const std::vector<std::string> paths = tiles::listSourceTiles(config_.tiles_dir, &list_error);
+  if (!list_error.empty()) log(Severity::kWarning, "geotiff", list_error);
+  const double now_unix_s = unixNow_s();
+  int queued = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (stopping_) return 0;
+    for (const std::string& path : paths) {
+      std::string key;
+      int index = 0, version = 0;
+      if (!tiles::parseTileFileName(fs::path(path).filename().string(), &key, &index, &version)) continue;
+      const auto seen = versions_seen_.find(key);
+      if (seen != versions_seen_.end() && seen->second >= version) continue;
+      struct stat st {};
+      if (min_age.count() > 0 && ::stat(path.c_str(), &st) == 0 &&
+          now_unix_s - (st.st_mtim.tv_sec + st.st_mtim.tv_nsec * 1e-9) < min_age.count() * 1e-3)
+        continue;
+      queueLocked(path);
+      ++queued;
+    }
+  }
+  if (queued > 0) cv_.notify_all();
+  return queued;
 }
 
 void WebMap::enqueueGeoTiff(const std::string& path) {

@@ -25,10 +25,12 @@ namespace exocet_web {
 
 /**
  * Subscribes to ~tile_topic, ~odometry_topic, ~datum_topic, ~usbl_topic and ~imu_topic; the GeoTIFFs are cut in the
- * web map's worker thread, never in a callback. The fused positions (UTM easting/northing in the datum's frame) are
- * converted to WGS 84 with the datum's zone (exocet_common::UtmGrid, GeographicLib); positions that come before the
- * datum wait for it (the last 10000). The heading is the IMU's yaw (ENU in the utm grid, as the fusion reads it)
- * turned to true north with the grid convergence; without an IMU the page shows the course over ground.
+ * web map's worker thread, never in a callback. ~tiles_dir is also looked at every 2 s and at shutdown for GeoTIFFs
+ * whose message was missed (written while the node was down or its subscription not yet connected: a respawn). The
+ * fused positions (UTM easting/northing in the datum's frame) are converted to WGS 84 with the datum's zone
+ * (exocet_common::UtmGrid, GeographicLib); positions that come before the datum wait for it (the last 10000). The
+ * heading is the IMU's yaw (ENU in the utm grid, as the fusion reads it) turned to true north with the grid
+ * convergence; without an IMU the page shows the course over ground.
  */
 class WebMapRos {
  public:
@@ -60,8 +62,9 @@ class WebMapRos {
   std::unique_ptr<server::WebServer> server_;
   diagnostic_updater::Updater updater_;
   ros::Subscriber tile_sub_, odometry_sub_, datum_sub_, usbl_sub_, imu_sub_;
-  ros::WallTimer timer_;  ///< vehicle events held back, diagnostics every second
+  ros::WallTimer timer_;  ///< vehicle events held back, diagnostics every second, the tiles folder looked at
   ros::WallTime last_diagnostics_;
+  ros::WallTime last_folder_look_;
 
   std::optional<exocet_common::UtmGrid> grid_;
   std::string datum_frame_;
@@ -69,6 +72,7 @@ class WebMapRos {
   std::optional<double> imu_yaw_rad_;  ///< ENU yaw of base_link, counter-clockwise from grid east
   ros::Time imu_stamp_;
   uint64_t tiles_received_ = 0, positions_ = 0, fixes_ = 0, rejected_ = 0;
+  uint64_t tiles_found_without_message_ = 0;
   std::string last_rejection_;
 };
 

@@ -20,7 +20,8 @@
  * At start() the site adopts the web tiles a previous run cut from the same GeoTIFFs (tiles.json: same name,
  * version, size, modification time, zoom levels), and queues the GeoTIFFs of tiles_dir that are new or changed: a
  * restarted node, or one pointed at a finished dive's folder, rebuilds what is missing only. The track comes back
- * from track.json, else from tiles_dir/fused_track.csv (the fusion's, in the tiles' UTM zone).
+ * from track.json, else from tiles_dir/fused_track.csv (the fusion's, in the tiles' UTM zone). queueUnseenGeoTiffs()
+ * finds the GeoTIFFs written since without a message (a node restarted, or not yet connected to the tile writer).
  */
 #pragma once
 
@@ -30,6 +31,7 @@
 #include <deque>
 #include <functional>
 #include <limits>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -111,6 +113,16 @@ class WebMap {
   /// Queues a GeoTIFF written or drawn again (a tile message's geotiff_path) for cutting. Returns at once.
   void enqueueGeoTiff(const std::string& path);
 
+  /**
+   * @brief Queues the GeoTIFFs of tiles_dir whose version was never queued, adopted nor left out at start
+   * (load_existing false): those whose message this node missed (written while it was down, or before its
+   * subscription was connected). One listing of the folder; a GeoTIFF that could not be read is not tried again.
+   * Nothing before start() or after shutdown().
+   * @param min_age a GeoTIFF modified less than this ago is left for the next call (its message is on its way)
+   * @return how many were queued
+   */
+  int queueUnseenGeoTiffs(std::chrono::milliseconds min_age = std::chrono::milliseconds(0));
+
   /// The vehicle at a time: appended to the track (thinned) and sent to the pages (batched).
   /// @param heading_deg clockwise from true north, NaN: unknown (the page shows the course over ground)
   void addVehiclePose(double stamp_s, double latitude_deg, double longitude_deg, double heading_deg);
@@ -164,6 +176,8 @@ class WebMap {
   void log(Severity severity, const std::string& topic, const std::string& message) const;
   void noteError(const std::string& topic, const std::string& message);
   void queueLocked(const std::string& path);
+  /// Notes the GeoTIFF's version as seen (queueUnseenGeoTiffs() leaves it); mutex_ held or the worker not started.
+  void markSeenLocked(const std::string& key, int version);
   void publishVehicleLocked();
   std::string tileJson(const tiles::SourceTile& source) const;
 
@@ -182,6 +196,7 @@ class WebMap {
   bool dirty_ = true;
   std::vector<tiles::SourceTile> sources_;      // the cutter's, copied after each update
   std::map<std::string, double> cut_unix_s_;    // when each source was last cut
+  std::map<std::string, int> versions_seen_;    // key -> newest version queued, adopted or left out at start
   std::set<std::pair<int, int>> finest_tiles_;  // (x, y) of the web tiles at the max zoom
   int min_zoom_ = -1, max_zoom_ = -1;
   std::vector<TrackPoint> track_;
