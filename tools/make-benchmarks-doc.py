@@ -901,23 +901,27 @@ BENCHMARKS = {
     'reliability.json': {
         'title': 'Reliability: faults survived',
         'command': 'rostest exocet_system_tests node_kill_replay.test; the same for bad_recordings_replay.test and '
-                   'truncated_bag_replay.test; rostest exocet_mosaic tile_writer_disk_full.test (make test runs them; '
-                   'each merges its keys into the file)',
-        'measures': 'Which faults the chain survives: nodes killed mid-dive, a full output disk, bad recordings.',
+                   'truncated_bag_replay.test; rostest exocet_mosaic tile_writer_disk_full.test (make test runs them); '
+                   'tools/multihost-test.sh (root); make soak (soak_* keys). Each merges its keys into the file',
+        'measures': 'Which faults the chain survives: nodes killed mid-dive, a full output disk, bad recordings, a '
+                    'degraded link between the vehicle and the surface, a dive of an hour.',
         'data': 'The sample out-and-back dive (PAL, 87 s) replayed at 2x (kills), 3x (bad recordings), 4x (truncated '
                 'bag); synthetic frames for the disk-full test.',
         'method': [
-            'Kills: the registration, the tile writer, the fusion and the trajectory logger are each killed twice with '
-            'SIGKILL during the replay; a kill is survived when the node is running again (respawned) and its output '
-            'goes on. Tiles lost: tile indices missing or tiles GDAL cannot read at the end. Frames lost per kill: '
-            'what the restarted tile writer reports its killed instance held and had not written.',
+            'Kills: the registration, the tile writer, the fusion, the trajectory logger and the web map are each '
+            'killed twice with SIGKILL during the replay; a kill is survived when the node is running again '
+            '(respawned) and its output goes on (the web map: serving again on the same port, and at the end every '
+            'final tile cut into the web site). Tiles lost: tile indices missing or tiles GDAL cannot read at the '
+            'end. Frames lost per kill: what the restarted tile writer reports its killed instance held and had not '
+            'written.',
             'Disk full: the output folder (a 16 MB tmpfs) is filled twice while mosaics close, then freed; an episode '
             'is survived when writing resumes, no index is skipped and every tile written before is unchanged.',
             'Bad recordings: corrupt JPEGs, images of another size, NaN and backwards navigation, duplicated stamps, a '
             'camera_info that changes, a truncated bag; each survived when it is logged (throttled) and counted on '
             '/diagnostics, no node restarts and the rest of the dive is fused and tiled.',
         ],
-        'targets': ['Every kill, disk-full episode and bad recording survived; tiles lost 0.'],
+        'targets': ['Every kill, disk-full episode and bad recording survived; tiles lost 0; soak: no frame dropped, '
+                    'each node\'s memory slope under 1 MB per 10 minutes of dive.'],
         'figures': [
             ('kills_tried', 'SIGKILLs of a node of the chain'),
             ('kills_survived', 'of them, the node respawned and its output went on'),
