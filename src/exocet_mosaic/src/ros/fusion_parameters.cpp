@@ -1,9 +1,15 @@
 #include "exocet_mosaic/ros/fusion_parameters.h"
 
+#include <signal.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <stdexcept>
+#include <vector>
 
 #include "exocet_common/ros/parameter_reader.h"
 
@@ -80,12 +86,37 @@ std::string defaultFusionStateFile(const std::string& private_namespace) {
   return inRosHome("/exocet_fusion_state" + nodeSuffix(private_namespace) + ".json");
 }
 
+// The scratch files are the process's own (two masters on one machine may each run a /fusion, as parallel rostests
+// do): named with the pid, and those of processes that are gone removed at start.
 std::string defaultLoopImageFolder(const std::string& private_namespace) {
-  return inRosHome("/exocet_loop_images" + nodeSuffix(private_namespace));
+  return inRosHome("/exocet_loop_images" + nodeSuffix(private_namespace) + "_pid" + std::to_string(::getpid()));
 }
 
 std::string defaultSmootherLogFile(const std::string& private_namespace) {
-  return inRosHome("/exocet_fusion_steps" + nodeSuffix(private_namespace) + ".bin");
+  return inRosHome("/exocet_fusion_steps" + nodeSuffix(private_namespace) + "_pid" + std::to_string(::getpid()) +
+                   ".bin");
+}
+
+std::vector<std::string> removeStaleFusionScratch(const std::string& private_namespace) {
+  namespace fs = std::filesystem;
+  const fs::path folder = fs::path(inRosHome("/")).parent_path();
+  const std::string node = nodeSuffix(private_namespace);
+  std::vector<std::string> removed;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(folder, ec)) {
+    const std::string name = entry.path().filename().string();
+    for (const std::string prefix : {"exocet_loop_images" + node + "_pid", "exocet_fusion_steps" + node + "_pid"}) {
+      if (name.compare(0, prefix.size(), prefix) != 0) continue;
+      char* end = nullptr;
+      const long pid = std::strtol(name.c_str() + prefix.size(), &end, 10);
+      if (end == name.c_str() + prefix.size() || pid <= 0 || pid == ::getpid()) continue;
+      if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to ask)
+      std::error_code remove_error;
+      fs::remove_all(entry.path(), remove_error);
+      if (!remove_error) removed.push_back(entry.path().string());
+    }
+  }
+  return removed;
 }
 
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {

@@ -42,6 +42,8 @@ double enuYawFromHeading_rad(double heading_rad) { return M_PI / 2.0 - heading_r
 
 FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh), private_nh_(private_nh), config_(readFusionNodeConfig(private_nh)), tf_listener_(tf_buffer_) {
+  for (const std::string& stale : removeStaleFusionScratch(private_nh.getNamespace()))
+    ROS_INFO("fusion: removed %s, left by a fusion process that is gone", stale.c_str());
   fu::FusionFrontEndConfig front_end;
   front_end.filter = config_.filter;
   front_end.keep_log = config_.keep_smoother_log;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include <ros/ros.h>
 
@@ -118,10 +119,14 @@ struct FusionNodeConfig {
 /// $ROS_HOME/exocet_fusion_state_<node>.json (~/.ros when ROS_HOME is unset), <node> the private namespace with its
 /// slashes as underscores: two fusions on one machine keep their own.
 std::string defaultFusionStateFile(const std::string& private_namespace);
-/// $ROS_HOME/exocet_loop_images_<node>/ (~/.ros when ROS_HOME is unset), <node> as in defaultFusionStateFile.
+/// $ROS_HOME/exocet_loop_images_<node>_pid<pid>/ (~/.ros when ROS_HOME is unset), <node> as in
+/// defaultFusionStateFile: this process's own scratch folder.
 std::string defaultLoopImageFolder(const std::string& private_namespace);
-/// $ROS_HOME/exocet_fusion_steps_<node>.bin (~/.ros when ROS_HOME is unset), <node> as in defaultFusionStateFile.
+/// $ROS_HOME/exocet_fusion_steps_<node>_pid<pid>.bin, as defaultLoopImageFolder: this process's own scratch file.
 std::string defaultSmootherLogFile(const std::string& private_namespace);
+/// Removes the default scratch files and folders of the node's earlier processes that are gone (a SIGKILL leaves
+/// them); returns their paths.
+std::vector<std::string> removeStaleFusionScratch(const std::string& private_namespace);
 
 /// @throws std::invalid_argument naming the parameter, its value and the allowed range.
 FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh);
