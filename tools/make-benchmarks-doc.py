@@ -861,7 +861,9 @@ BENCHMARKS = {
         'method': [
             'The whole chain of replay.launch (registration, fusion with its pose graph and live loop closure, tile '
             'writer, web map) on a private ROS master, the bag played at the rate tried first (8x), then slower '
-            'after a drop. Frames dropped as bench_tiles counts them.',
+            'after a drop. Frames dropped as bench_tiles counts them; a rate counts as without drop only when the '
+            'fusion did not reset either (its resets and late inputs dropped, and the web map\'s longest queue, from '
+            'their /diagnostics).',
             'Every 2 s of wall time each node\'s resident memory (VmRSS) and CPU time (user + system) are sampled '
             'against the dive time the registration has reached. Memory slope: least-squares line through the '
             'samples after the warm-up (10 minutes of dive), in MB per 10 minutes of dive. CPU per frame: the CPU '
@@ -896,6 +898,10 @@ BENCHMARKS = {
             ('landmark_error_p95_m', 'landmark error p95, whole dive (m)'),
             ('landmarks_*', 'landmarks found / expected'),
             ('replay_wall_s', 'wall time of the replay (s)'),
+            ('fusion_resets', 'resets of the fusion (filter, graph and tracks started again)'),
+            ('fusion_late_inputs_dropped', 'inputs the fusion dropped as late'),
+            ('web_map_queue_length_max', 'web map: longest queue of GeoTIFFs waiting to be cut'),
+            ('web_map_max_cut_latency_ms', 'web map: tile message queued -> cut and announced, max (ms)'),
         ],
     },
     'reliability.json': {

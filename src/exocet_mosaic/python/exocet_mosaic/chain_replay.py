@@ -174,6 +174,9 @@ class ChainMonitor:
         self.raw_odometry = []  # (wall s, serialized nav_msgs/Odometry)
         self.diagnostics = {}   # last key/value of the tile writer's status, and its wall time
         self.diag_history = []  # (wall s, images received)
+        self.fusion_status = {}  # last key/value of the fusion's status
+        self.web_status = {}     # last key/value of the web map's status
+        self.web_queue_max = 0   # longest queue of GeoTIFFs waiting to be cut that the web map reported
         self.tiles = []         # exocet_msgs/Tile as dicts
         self.subs = [
             rospy.Subscriber('/mosaic/motion', rospy.AnyMsg, self.on_motion, queue_size=10000, tcp_nodelay=True),
@@ -218,7 +221,18 @@ class ChainMonitor:
 
     def on_diagnostics(self, msg):
         for status in msg.status:
-            if 'tiles' in status.name and 'tile' in status.hardware_id:
+            if status.name.endswith('fusion: fusion'):
+                with self.lock:
+                    self.fusion_status = {kv.key: kv.value for kv in status.values}
+            elif status.name.endswith('web map'):
+                values = {kv.key: kv.value for kv in status.values}
+                with self.lock:
+                    self.web_status = values
+                    try:
+                        self.web_queue_max = max(self.web_queue_max, int(values.get('queue length', '0')))
+                    except ValueError:
+                        pass
+            elif 'tiles' in status.name and 'tile' in status.hardware_id:
                 values = {kv.key: kv.value for kv in status.values}
                 with self.lock:
                     self.diagnostics = dict(values, _summary=status.message, _wall_s=time.time())
@@ -329,6 +343,8 @@ def run_chain(root, master, bag, rate, tiles_dir, timeout_s, launch_args=(), nod
             motions, odometry = monitor.decoded()
             result.update({'motions': motions, 'odometry': odometry,
                            'diagnostics': dict(monitor.diagnostics), 'diag_history': list(monitor.diag_history),
+                           'fusion_status': dict(monitor.fusion_status), 'web_status': dict(monitor.web_status),
+                           'web_queue_max': monitor.web_queue_max,
                            'tile_msgs': list(monitor.tiles)})
         result['samples'] = samples
         result['launch_wall_s'] = end - start
@@ -379,6 +395,19 @@ def chain_figures(run, frames, tiles_dir=None, stamps=None, fps=25.0, nodes=NODE
     diag = run.get('diagnostics', {})
     fig = {'rate': run['rate'], 'frames': frames, 'motions': len(motions),
            'motions_failed': sum(1 for m in motions if m[1]), 'launch_wall_s': rnd(run.get('launch_wall_s'), 1)}
+    # The fusion's resets and late inputs (a chain too slow for the rate loses its filter's history, not frames) and
+    # how far the web map fell behind, from their last /diagnostics.
+    for key, name in (('resets', 'fusion_resets'), ('late inputs dropped', 'fusion_late_inputs_dropped')):
+        try:
+            fig[name] = int(run.get('fusion_status', {})[key])
+        except (KeyError, ValueError):
+            pass
+    if run.get('web_status'):
+        fig['web_map_queue_length_max'] = run.get('web_queue_max')
+        try:
+            fig['web_map_max_cut_latency_ms'] = float(run['web_status'].get('max cut latency (ms)', 'nan'))
+        except ValueError:
+            pass
     try:
         received = int(diag.get('images received', '-1'))
     except ValueError:
