@@ -320,7 +320,7 @@ class NodeKillReplayTest(unittest.TestCase):
             self.assertTrue(kill['stream_closed'], 'the killed web map\'s event stream is closed: %s' % kill)
             self.assertTrue(kill['stream_reset'], 'a page resuming from the killed run is reset: %s' % kill)
             self.assertEqual(kill['tiles_taken_over'], kill['tiles_unchanged'],
-                             'the restarted web map takes over the tiles cut before: %s' % kill)
+                             'the restarted web map takes over the tiles already cut: %s' % kill)
             self.assertTrue(kill['cut_after_restart'], 'the restarted web map cuts the tiles written since: %s' % kill)
         self.assertGreater(sum(k['tiles_taken_over'] for k in web_kills), 0, 'a web map is killed with tiles cut')
         for kill in writer_kills:

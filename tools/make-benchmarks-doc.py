@@ -856,7 +856,7 @@ BENCHMARKS = {
                     'the start and at the end.',
         'data': 'config/dives/soak_pal.yaml rendered once into out/bench/cache/soak_pal.bag: PAL (720x576) at 10 '
                 'frames/s, a 25-line lawnmower of 72 m lines 1.6 m apart at 2.5 m altitude over a flat seabed (each '
-                'line overlaps the one before: the pose graph finds loops all dive long), USBL 0.5 m at 1 Hz, 40 '
+                'line overlaps its neighbours: the pose graph finds loops all dive long), USBL 0.5 m at 1 Hz, 40 '
                 'checker landmarks along the track.',
         'method': [
             'The whole chain of replay.launch (registration, fusion with its pose graph and live loop closure, tile '

@@ -3,13 +3,8 @@
 # out/bench/<name>.json. Benchmarks measure; they never fail because a machine is slow.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-export PATH=/usr/bin:/bin:$PATH
-export ROS_HOME=${ROS_HOME:-$PWD/out/ros}
-set +u  # setup.bash reads unset variables
-# shellcheck disable=SC1091
-source devel/setup.bash
-set -u
-mkdir -p out/bench
+# shellcheck source=tools/workspace-env.sh
+source tools/workspace-env.sh
 status=0
 for bench in devel/lib/*/bench_*; do
   [[ -x $bench ]] || continue

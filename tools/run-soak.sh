@@ -4,11 +4,6 @@
 # out/bench/soak.json and the soak_* keys of out/bench/reliability.json. Arguments go to soak_dive (--rate, --no-web).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-export PATH=/usr/bin:/bin:$PATH
-export ROS_HOME=${ROS_HOME:-$PWD/out/ros}
-set +u  # setup.bash reads unset variables
-# shellcheck disable=SC1091
-source devel/setup.bash
-set -u
-mkdir -p out/bench
+# shellcheck source=tools/workspace-env.sh
+source tools/workspace-env.sh
 exec devel/lib/exocet_mosaic/soak_dive --output-dir out/bench "$@"

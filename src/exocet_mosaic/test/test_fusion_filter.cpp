@@ -609,17 +609,29 @@ TEST(NavigationFilter, PredictedAtExtrapolatesWithoutChangingTheState) {
   EXPECT_DOUBLE_EQ(filter.predictedAt(1.0).stamp_s, now.stamp_s);  // not later: the current state
 }
 
-TEST(NavigationFilter, LogOffKeepsOnlyTheWindowAndGivesTheSameEstimates) {
+/// A minute's dive for a filter whose history window is 4 s, and two filters of that model started on it.
+struct ShortWindowDive {
+  explicit ShortWindowDive(unsigned seed) {
+    dc.duration_s = 60.0;
+    dc.seed = seed;
+    dc.model = FilterConfig();
+    dc.model.history_s = 4.0;
+    dive = makeSyntheticDive(dc);
+  }
+  void start(NavigationFilter* filter) const {
+    filter->initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  }
   SyntheticDiveConfig dc;
-  dc.duration_s = 60.0;
-  dc.seed = 21;
-  dc.model = FilterConfig();
-  dc.model.history_s = 4.0;
-  const SyntheticDive dive = makeSyntheticDive(dc);
-  NavigationFilter full(dc.model), bounded(dc.model);
+  SyntheticDive dive;
+};
+
+TEST(NavigationFilter, LogOffKeepsOnlyTheWindowAndGivesTheSameEstimates) {
+  const ShortWindowDive d(21);
+  const SyntheticDive& dive = d.dive;
+  NavigationFilter full(d.dc.model), bounded(d.dc.model);
   bounded.setKeepLog(false);
-  full.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
-  bounded.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  d.start(&full);
+  d.start(&bounded);
   size_t largest = 0;
   for (const NavEvent& e : dive.events) {
     const UpdateResult a = feed(full, e), b = feed(bounded, e);
@@ -632,17 +644,13 @@ TEST(NavigationFilter, LogOffKeepsOnlyTheWindowAndGivesTheSameEstimates) {
 }
 
 TEST(NavigationFilter, LogWrittenOutStaysBoundedInMemoryAndReadsBackWhole) {
-  SyntheticDiveConfig dc;
-  dc.duration_s = 60.0;
-  dc.seed = 22;
-  dc.model = FilterConfig();
-  dc.model.history_s = 4.0;
-  const SyntheticDive dive = makeSyntheticDive(dc);
+  const ShortWindowDive d(22);
+  const SyntheticDive& dive = d.dive;
   const std::string path = (std::filesystem::temp_directory_path() / "exocet_test_filter_steps.bin").string();
-  NavigationFilter full(dc.model), written(dc.model);
+  NavigationFilter full(d.dc.model), written(d.dc.model);
   written.setLogFile(path);
-  full.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
-  written.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  d.start(&full);
+  d.start(&written);
   size_t largest = 0;
   for (const NavEvent& e : dive.events) {
     feed(full, e);
