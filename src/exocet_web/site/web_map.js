@@ -12,7 +12,7 @@
   const stats = {
     tileLoads: 0, tileErrors: 0, failedTiles: [], events: 0, resets: 0, webTileEvents: 0, tileEvents: 0,
     trackPoints: 0, usblFixes: 0, footprints: 0, connected: false, lastEventId: null, loadedRevs: {},
-    pageLoadedAt: Date.now(), lastTile: null, cutEventIds: {},
+    pageLoadedAt: Date.now(), lastTile: null, cutEventIds: {}, cutVersions: {},
   };
 
   const map = L.map('map', { zoomControl: true, maxZoom: 28, worldCopyJump: false });
@@ -25,6 +25,9 @@
   let zoom = { min: -1, max: -1 };
   let finest = new Set();           // "x,y" of the web tiles at zoom.max
   let levels = new Map();           // z -> Set of "x,y": the tiles at coarser levels, from the finest
+  // "x,y" of finest tiles announced before their coarser levels (a cut announces its finest level first): no parent
+  // of theirs is asked for until the cut's "coarser" event.
+  let awaitingParents = new Set();
   let baseRev = 0;                  // event id of the snapshot
   const rev = new Map();            // "z/x/y" -> event id of its last change
   // The node's run ("<run>-<n>" ids) in the tile URLs too: a restarted node counts from 0 again, and the browser
@@ -36,6 +39,7 @@
     if (!levels.has(z)) {
       const s = new Set(), shift = zoom.max - z;
       for (const k of finest) {
+        if (awaitingParents.has(k)) continue;
         const [x, y] = k.split(',');
         s.add((x >> shift) + ',' + (y >> shift));
       }
@@ -47,9 +51,19 @@
     if (zoom.max < 0 || z > zoom.max || z < zoom.min) return false;
     return levelSet(z).has(x + ',' + y);
   }
-  function addFinest(x, y) {
+  function addFinest(x, y, parentsBuilt) {
     finest.add(x + ',' + y);
+    if (!parentsBuilt) { awaitingParents.add(x + ',' + y); return; }
+    awaitingParents.delete(x + ',' + y);
     for (const [z, s] of levels) s.add((x >> (zoom.max - z)) + ',' + (y >> (zoom.max - z)));
+  }
+  function parentsBuilt() {
+    const waiting = Array.from(awaitingParents);
+    awaitingParents = new Set();
+    for (const k of waiting) {
+      const [x, y] = k.split(',').map(Number);
+      addFinest(x, y, true);
+    }
   }
 
   const MosaicLayer = L.TileLayer.extend({
@@ -76,7 +90,7 @@
   mosaic.addTo(map);
 
   function setZoomRange(z) {
-    if (z.max !== zoom.max) { finest = new Set(); levels = new Map(); }
+    if (z.max !== zoom.max) { finest = new Set(); levels = new Map(); awaitingParents = new Set(); }
     if (z.min !== zoom.min) levels = new Map();
     zoom = { min: z.min, max: z.max };
     if (zoom.max < 0) return;
@@ -301,7 +315,11 @@
     setZoomRange(s.zoom || { min: -1, max: -1 });
     finest = new Set();
     levels = new Map();
-    if (s.web_tiles && s.web_tiles.z === zoom.max) for (const xy of s.web_tiles.xy) finest.add(xy[0] + ',' + xy[1]);
+    awaitingParents = new Set();
+    if (s.web_tiles && s.web_tiles.z === zoom.max) {
+      for (const xy of s.web_tiles.xy) finest.add(xy[0] + ',' + xy[1]);
+      for (const xy of s.web_tiles.awaiting_parents || []) awaitingParents.add(xy[0] + ',' + xy[1]);
+    }
     setMosaicBounds(s.bounds);
     footprints.clearLayers();
     footprintByKey.clear();
@@ -335,15 +353,18 @@
   }
   function onWebTiles(d, id) {
     stats.webTileEvents += 1;
-    stats.cutEventIds[d.key] = id;
+    // A cut comes as two events, the finest level first: the first one of each version is the cut's.
+    if (d.levels !== 'coarser' || stats.cutVersions[d.key] !== d.version) stats.cutEventIds[d.key] = id;
+    stats.cutVersions[d.key] = d.version;
     const zoomChanged = d.zoom.min !== zoom.min || d.zoom.max !== zoom.max;
     if (zoomChanged) setZoomRange(d.zoom);
     const changed = new Set();
+    if (d.levels !== 'finest') parentsBuilt();
     for (const [z, x, y] of d.written) {
       const key = z + '/' + x + '/' + y;
       rev.set(key, id);
       changed.add(key);
-      if (z === zoom.max) addFinest(x, y);
+      if (z === zoom.max) addFinest(x, y, d.levels !== 'finest');
     }
     let removedAny = false;
     for (const [z, x, y] of d.removed) {

@@ -80,9 +80,14 @@ TEST(WebMap, BuildsTheSiteAnnouncesTilesAndRestartsWithoutCuttingAgain) {
     ASSERT_EQ(events["tile"].size(), 1u);
     EXPECT_EQ(events["tile"][0]["key"], "tile_0000");
     EXPECT_EQ(events["tile"][0]["metadata"]["frames_composed"], 42);
-    ASSERT_EQ(events["webtiles"].size(), 1u);
+    // The finest level announced first, then the coarser levels built from it.
+    ASSERT_EQ(events["webtiles"].size(), 2u);
+    EXPECT_EQ(events["webtiles"][0]["levels"], "finest");
     EXPECT_FALSE(events["webtiles"][0]["written"].empty());
     EXPECT_EQ(events["webtiles"][0]["zoom"]["max"], 23);
+    for (const auto& t : events["webtiles"][0]["written"]) EXPECT_EQ(t[0], 23);
+    EXPECT_EQ(events["webtiles"][1]["levels"], "coarser");  // none here: the one tile fits in a web tile of z 23
+    for (const auto& t : events["webtiles"][1]["written"]) EXPECT_LT(t[0], 23);
 
     // A tile written during the dive, and the vehicle moving.
     ASSERT_TRUE(ew::testing::writeSyntheticGeoTiff(dir.file("tiles/tile_0001.tif"), tileAt(1.0)));
@@ -95,11 +100,13 @@ TEST(WebMap, BuildsTheSiteAnnouncesTilesAndRestartsWithoutCuttingAgain) {
     events = eventsOf(map.events());
     ASSERT_EQ(events["tile"].size(), 2u);
     EXPECT_EQ(events["tile"][1]["key"], "tile_0001");
-    for (const auto& t : events["webtiles"][1]["written"]) {
-      const std::string path = dir.file("site/tiles/") + std::to_string(int(t[0])) + "/" + std::to_string(int(t[1])) +
-                               "/" + std::to_string(int(t[2])) + ".png";
-      EXPECT_TRUE(std::filesystem::exists(path)) << path;
-    }
+    ASSERT_EQ(events["webtiles"].size(), 4u);
+    for (const int e : {2, 3})
+      for (const auto& t : events["webtiles"][e]["written"]) {
+        const std::string path = dir.file("site/tiles/") + std::to_string(int(t[0])) + "/" + std::to_string(int(t[1])) +
+                                 "/" + std::to_string(int(t[2])) + ".png";
+        EXPECT_TRUE(std::filesystem::exists(path)) << path;
+      }
     size_t points = 0;
     for (const auto& e : events["track"]) points += e["points"].size();
     EXPECT_EQ(points, 20u);  // 0.11 m apart: none thinned at 0.1 m

@@ -145,7 +145,11 @@ class WebMapNodeTest(unittest.TestCase):
         tiles.publish(Tile(index=0, version=1, geotiff_path=path, epsg=32631, utm_zone=31, gsd_m=GSD_M))
         tile_event = events.wait_for(lambda k, d: k == 'tile' and d['key'] == 'tile_0000', 'tile tile_0000')
         self.assertEqual(tile_event['metadata']['frames_composed'], 12)
-        cut = events.wait_for(lambda k, d: k == 'webtiles' and d['key'] == 'tile_0000', 'webtiles of tile_0000')
+        # The finest level announced first, then the coarser levels (none here: the tile fits in one web tile).
+        cut = events.wait_for(lambda k, d: k == 'webtiles' and d['key'] == 'tile_0000' and d['levels'] == 'finest',
+                              'webtiles of tile_0000, finest level')
+        events.wait_for(lambda k, d: k == 'webtiles' and d['key'] == 'tile_0000' and d['levels'] == 'coarser',
+                        'webtiles of tile_0000, coarser levels')
         self.assertEqual(cut['zoom']['max'], 23)
         self.assertTrue(cut['written'])
         for z, x, y in cut['written']:
@@ -177,7 +181,9 @@ class WebMapNodeTest(unittest.TestCase):
         path = os.path.join(tiles_dir, 'tile_0001.tif')
         write_geotiff(path, 1.0, (40, 200, 40))
         tiles.publish(Tile(index=1, version=1, geotiff_path=path, epsg=32631, utm_zone=31, gsd_m=GSD_M))
-        cut = events.wait_for(lambda k, d: k == 'webtiles' and d['key'] == 'tile_0001', 'webtiles of tile_0001')
+        cut = events.wait_for(lambda k, d: k == 'webtiles' and d['key'] == 'tile_0001' and d['levels'] == 'finest',
+                              'webtiles of tile_0001, finest level')
+        self.assertTrue(cut['written'])
         for z, x, y in cut['written']:
             self.assertEqual(get('%stiles/%d/%d/%d.png' % (url, z, x, y))[0], 200)
         # A tile message for a file GDAL cannot read: reported, the node goes on.

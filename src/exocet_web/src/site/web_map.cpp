@@ -245,7 +245,7 @@ void WebMap::loadTrack() {
     }
   }
   // A finished dive: the fusion's track, in the tiles' UTM zone.
-  const std::string csv = !config_.track_csv.empty() ? config_.track_csv
+  const std::string csv = !config_.track_csv.empty()  ? config_.track_csv
                           : config_.tiles_dir.empty() ? ""
                                                       : config_.tiles_dir + "/fused_track.csv";
   std::ifstream in(csv);
@@ -411,7 +411,59 @@ void WebMap::process(const Job& job) {
     noteError("geotiff", error);
     return;
   }
-  const tiles::CutReport report = cutter_->update(source);
+  // The finest level is announced as soon as it is on disk (a page following the vehicle shows that level), the
+  // coarser levels once they are built.
+  size_t finest_written = 0, finest_removed = 0;
+  double first_announce_ms = std::numeric_limits<double>::quiet_NaN();
+  const auto announce = [&](const tiles::CutReport& part, size_t written_from, size_t removed_from, bool finest_only) {
+    const double latency_ms = std::chrono::duration<double, std::milli>(Clock::now() - job.queued).count();
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (std::isnan(first_announce_ms)) {
+      // The footprint first: a page takes the mosaic's bounds from the footprints.
+      first_announce_ms = latency_ms;
+      sources_ = cutter_->sources();
+      if (cutter_->source(source.key)) events_.publish("tile", tileJson(source));
+    }
+    const int previous_min = min_zoom_, previous_max = max_zoom_;
+    min_zoom_ = cutter_->minZoom();
+    max_zoom_ = cutter_->maxZoom();
+    if (previous_max != max_zoom_) finest_tiles_.clear();
+    awaiting_parents_.clear();
+    Json written = Json::array(), removed = Json::array();
+    for (size_t i = written_from; i < part.written.size(); ++i) {
+      const auto& t = part.written[i];
+      if (t.z == max_zoom_) {
+        finest_tiles_.insert({t.x, t.y});
+        if (finest_only) awaiting_parents_.insert({t.x, t.y});
+      }
+      written.push_back({t.z, t.x, t.y});
+    }
+    for (size_t i = removed_from; i < part.removed.size(); ++i) {
+      const auto& t = part.removed[i];
+      if (t.z == max_zoom_) finest_tiles_.erase({t.x, t.y});
+      removed.push_back({t.z, t.x, t.y});
+    }
+    if (finest_only && written.empty() && removed.empty()) return;  // announced with the coarser levels
+    dirty_ = true;
+    Json cut;
+    cut["key"] = source.key;
+    cut["index"] = source.index;
+    cut["version"] = source.version;
+    cut["levels"] = finest_only ? "finest" : "coarser";
+    cut["zoom"] = {{"min", min_zoom_}, {"max", max_zoom_}};
+    cut["zoom_changed"] = previous_min != min_zoom_ || previous_max != max_zoom_;
+    cut["written"] = written;
+    cut["removed"] = removed;
+    cut["cut_ms"] = std::round(part.total_ms);
+    cut["warp_ms"] = std::round(part.warp_ms);
+    cut["latency_ms"] = std::round(latency_ms);
+    events_.publish("webtiles", jsonLine(cut));
+  };
+  const tiles::CutReport report = cutter_->update(source, [&](const tiles::CutReport& finest) {
+    announce(finest, 0, 0, true);
+    finest_written = finest.written.size();
+    finest_removed = finest.removed.size();
+  });
   if (!report.ok) noteError("cut", "cutting '" + job.path + "': " + report.error);
   for (const std::string& key : report.unreadable) {
     if (key == source.key) continue;
@@ -430,52 +482,33 @@ void WebMap::process(const Job& job) {
     if (!queued) log(Severity::kWarning, "geotiff", "'" + other->path + "' cannot be opened any more");
   }
   const double done_unix_s = unixNow_s();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    sources_ = cutter_->sources();
+    cut_unix_s_[source.key] = done_unix_s;
+    stats_.web_tiles_written += report.written.size();
+    stats_.web_tiles_removed += report.removed.size();
+    if (report.ok) ++stats_.geotiffs_cut;
+    stats_.sources = static_cast<int>(sources_.size());
+    stats_.web_tiles = static_cast<int>(cutter_->tiles().size());
+    stats_.last_cut_ms = report.total_ms;
+    total_cut_ms_ += report.total_ms;
+    total_cut_tiles_ += report.written.size();
+    if (total_cut_tiles_ > 0) stats_.cut_ms_per_web_tile = total_cut_ms_ / double(total_cut_tiles_);
+  }
+  announce(report, finest_written, finest_removed, false);
+  const double latency_ms = std::isnan(first_announce_ms)
+                                ? std::chrono::duration<double, std::milli>(Clock::now() - job.queued).count()
+                                : first_announce_ms;
   std::lock_guard<std::mutex> lock(mutex_);
-  sources_ = cutter_->sources();
-  const int previous_min = min_zoom_, previous_max = max_zoom_;
-  min_zoom_ = cutter_->minZoom();
-  max_zoom_ = cutter_->maxZoom();
-  if (previous_max != max_zoom_) finest_tiles_.clear();
-  for (const auto& t : report.written)
-    if (t.z == max_zoom_) finest_tiles_.insert({t.x, t.y});
-  for (const auto& t : report.removed)
-    if (t.z == max_zoom_) finest_tiles_.erase({t.x, t.y});
-  cut_unix_s_[source.key] = done_unix_s;
-  stats_.web_tiles_written += report.written.size();
-  stats_.web_tiles_removed += report.removed.size();
-  if (report.ok) ++stats_.geotiffs_cut;
-  stats_.sources = static_cast<int>(sources_.size());
-  stats_.web_tiles = static_cast<int>(cutter_->tiles().size());
   stats_.min_zoom = min_zoom_;
   stats_.max_zoom = max_zoom_;
-  stats_.last_cut_ms = report.total_ms;
-  total_cut_ms_ += report.total_ms;
-  total_cut_tiles_ += report.written.size();
-  if (total_cut_tiles_ > 0) stats_.cut_ms_per_web_tile = total_cut_ms_ / double(total_cut_tiles_);
-  dirty_ = true;
-  if (cutter_->source(source.key)) events_.publish("tile", tileJson(source));
-  Json cut;
-  cut["key"] = source.key;
-  cut["index"] = source.index;
-  cut["version"] = source.version;
-  cut["zoom"] = {{"min", min_zoom_}, {"max", max_zoom_}};
-  cut["zoom_changed"] = previous_min != min_zoom_ || previous_max != max_zoom_;
-  Json written = Json::array(), removed = Json::array();
-  for (const auto& t : report.written) written.push_back({t.z, t.x, t.y});
-  for (const auto& t : report.removed) removed.push_back({t.z, t.x, t.y});
-  cut["written"] = written;
-  cut["removed"] = removed;
-  cut["cut_ms"] = std::round(report.total_ms);
-  cut["warp_ms"] = std::round(report.warp_ms);
-  const double latency_ms = std::chrono::duration<double, std::milli>(Clock::now() - job.queued).count();
-  cut["latency_ms"] = std::round(latency_ms);
-  events_.publish("webtiles", jsonLine(cut));
   log(Severity::kDebug, "cut",
       source.key + " v" + std::to_string(source.version) + ": " + std::to_string(report.written.size()) +
           " web tiles written, " + std::to_string(report.removed.size()) + " removed in " +
           std::to_string(std::lround(report.total_ms)) + " ms (GDAL warp " +
-          std::to_string(std::lround(report.warp_ms)) + " ms, " + std::to_string(report.sources_warped) + " warps), " +
-          std::to_string(std::lround(latency_ms)) + " ms after it was queued");
+          std::to_string(std::lround(report.warp_ms)) + " ms, " + std::to_string(report.sources_warped) +
+          " warps), finest level announced " + std::to_string(std::lround(latency_ms)) + " ms after it was queued");
   stats_.last_latency_ms = latency_ms;
   stats_.max_latency_ms = std::isnan(stats_.max_latency_ms) ? latency_ms : std::max(stats_.max_latency_ms, latency_ms);
   (void)start;
@@ -615,7 +648,10 @@ std::string WebMap::snapshotJson() const {
   j["tiles"] = tiles;
   Json xy = Json::array();
   for (const auto& [x, y] : finest_tiles_) xy.push_back({x, y});
-  j["web_tiles"] = {{"z", max_zoom_}, {"xy", xy}};
+  Json awaiting = Json::array();
+  for (const auto& [x, y] : awaiting_parents_) awaiting.push_back({x, y});
+  // awaiting_parents: finest web tiles announced whose coarser levels are still being cut (not there yet).
+  j["web_tiles"] = {{"z", max_zoom_}, {"xy", xy}, {"awaiting_parents", awaiting}};
   Json track = Json::array();
   for (const auto& p : track_) track.push_back({degrees(p.latitude_deg), degrees(p.longitude_deg), p.stamp_s});
   j["track"] = track;

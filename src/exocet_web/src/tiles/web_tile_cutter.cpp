@@ -191,7 +191,7 @@ void WebTileCutter::adopt(const std::vector<SourceTile>& sources, int min_zoom, 
   }
 }
 
-CutReport WebTileCutter::update(const SourceTile& source) {
+CutReport WebTileCutter::update(const SourceTile& source, const FinestLevelCallback& on_finest_level) {
   MercatorBox dirty = source.bounds;
   const auto previous = sources_.find(source.key);
   if (previous != sources_.end()) dirty = dirty.unitedWith(previous->second.bounds);
@@ -211,7 +211,7 @@ CutReport WebTileCutter::update(const SourceTile& source) {
     max_zoom_ = std::max(max_zoom_, 1);
     min_zoom_ = config_.min_zoom >= 0 ? std::min(config_.min_zoom, max_zoom_) : max_zoom_;
   }
-  return recut(dirty, on_top ? source.key : std::string());
+  return recut(dirty, on_top ? source.key : std::string(), on_finest_level);
 }
 
 CutReport WebTileCutter::remove(const std::string& key) {
@@ -226,12 +226,18 @@ CutReport WebTileCutter::remove(const std::string& key) {
   return recut(dirty);
 }
 
-CutReport WebTileCutter::recut(const MercatorBox& dirty, const std::string& only_key) {
+CutReport WebTileCutter::recut(const MercatorBox& dirty, const std::string& only_key,
+                               const FinestLevelCallback& on_finest_level) {
   const auto start = Clock::now();
   CutReport report;
   try {
     const TileRange range = tilesCovering(dirty, max_zoom_);
     cutFinestLevel(range, only_key, &report);
+    if (on_finest_level) {
+      report.ok = report.error.empty();
+      report.total_ms = msSince(start);
+      on_finest_level(report);
+    }
     std::set<TileId> level;
     for (const TileId& t : range.tiles()) level.insert(t);
     buildParents(std::move(level), min_zoom_, &report);

@@ -194,10 +194,11 @@ class WebMap {
   bool started_ = false;
   bool shut_down_ = false;
   bool dirty_ = true;
-  std::vector<tiles::SourceTile> sources_;      // the cutter's, copied after each update
-  std::map<std::string, double> cut_unix_s_;    // when each source was last cut
-  std::map<std::string, int> versions_seen_;    // key -> newest version queued, adopted or left out at start
-  std::set<std::pair<int, int>> finest_tiles_;  // (x, y) of the web tiles at the max zoom
+  std::vector<tiles::SourceTile> sources_;          // the cutter's, copied after each update
+  std::map<std::string, double> cut_unix_s_;        // when each source was last cut
+  std::map<std::string, int> versions_seen_;        // key -> newest version queued, adopted or left out at start
+  std::set<std::pair<int, int>> finest_tiles_;      // (x, y) of the web tiles at the max zoom
+  std::set<std::pair<int, int>> awaiting_parents_;  // of those, the ones whose coarser levels are being built
   int min_zoom_ = -1, max_zoom_ = -1;
   std::vector<TrackPoint> track_;
   std::vector<TrackPoint> unsent_track_;

@@ -15,6 +15,7 @@
  */
 #pragma once
 
+#include <functional>
 #include <map>
 #include <set>
 
@@ -57,6 +58,10 @@ struct CutReport {
   double total_ms = 0.0;   ///< wall time of the update
 };
 
+/// Called once the finest level of an update is on disk, before its coarser levels are built: `finest` holds the
+/// finest-level web tiles written or removed so far (the report's other fields are not final yet).
+using FinestLevelCallback = std::function<void(const CutReport& finest)>;
+
 /// Not thread-safe: one thread cuts. The web tiles may be read meanwhile (renamed into place).
 class WebTileCutter {
  public:
@@ -74,8 +79,10 @@ class WebTileCutter {
   /**
    * @brief Adds a GeoTIFF, or replaces the one of the same key (a new version): re-cuts the web tiles of the union of
    * its old and new outlines at the max zoom, then their parents. The first source sets the max zoom when automatic.
+   * @param on_finest_level when set, called between the finest level and its parents: a page showing the finest
+   * level can fetch its web tiles while the coarser levels are being built. The returned report lists every level.
    */
-  CutReport update(const SourceTile& source);
+  CutReport update(const SourceTile& source, const FinestLevelCallback& on_finest_level = FinestLevelCallback());
 
   /// Removes the GeoTIFF of `key` and re-cuts the web tiles of its outline (those left without data are deleted).
   CutReport remove(const std::string& key);
@@ -95,7 +102,8 @@ class WebTileCutter {
 
  private:
   /// Cuts the area again; `only_key`: draw that source over the web tiles as they are (a new tile on top).
-  CutReport recut(const MercatorBox& dirty, const std::string& only_key = std::string());
+  CutReport recut(const MercatorBox& dirty, const std::string& only_key = std::string(),
+                  const FinestLevelCallback& on_finest_level = FinestLevelCallback());
   void cutFinestLevel(const TileRange& range, const std::string& only_key, CutReport* report);
   void buildParents(std::set<TileId> children, int down_to_zoom, CutReport* report);
   void buildParent(const TileId& parent, CutReport* report);
