@@ -535,7 +535,7 @@ BENCHMARKS = {
             'Latency, for each tile version written (first versions and re-renderings): from the tile writer\'s Tile '
             'message (sent once the GeoTIFF is renamed into place) to a client having received the first "webtiles" '
             'event of that tile at that version or a later one (the node cuts only the newest of versions queued '
-            'together) and fetched the web tiles it asks for (status 200); median, p95 and max over versions and '
+            'together; a cut announces its finest level first, then the coarser levels built from it) and fetched the web tiles it asks for (status 200); median, p95 and max over versions and '
             'clients; failed requests by HTTP status or, without an answer, by error. CPU per web tile: '
             'web_map_node\'s user + system time over the web tiles it cut (all levels), in the run without clients. '
             'Chain frames per second: image pairs registered (/mosaic/motion) per wall second between the first and '
@@ -546,7 +546,7 @@ BENCHMARKS = {
         'figures': [
             ('tile_written_to_announced_ms.*', 'GeoTIFF written -> its announcement received by a client (ms)'),
             ('tile_written_to_served_ms.*', 'GeoTIFF written -> all its web tiles fetched by a client (ms)'),
-            ('node_max_cut_latency_ms', 'web_map_node: tile message queued -> cut and announced, max (ms)'),
+            ('node_max_cut_latency_ms', 'web_map_node: tile message queued -> its finest level cut and announced, max (ms)'),
             ('cpu_ms_per_web_tile', 'web_map_node CPU per web tile cut (ms)'),
             ('wall_ms_per_web_tile', 'cutting wall time per web tile (ms)'),
             ('chain_fps_*', 'image pairs registered per second'),
@@ -901,7 +901,7 @@ BENCHMARKS = {
             ('fusion_resets', 'resets of the fusion (filter, graph and tracks started again)'),
             ('fusion_late_inputs_dropped', 'inputs the fusion dropped as late'),
             ('web_map_queue_length_max', 'web map: longest queue of GeoTIFFs waiting to be cut'),
-            ('web_map_max_cut_latency_ms', 'web map: tile message queued -> cut and announced, max (ms)'),
+            ('web_map_max_cut_latency_ms', 'web map: tile message queued -> its finest level cut and announced, max (ms)'),
         ],
     },
     'reliability.json': {
