@@ -92,7 +92,8 @@ cv::Point2d apply(const cv::Matx33d& h, double u, double v) {
 
 }  // namespace
 
-ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>& placements) const {
+ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>& placements,
+                                    const std::map<std::string, std::array<double, 3>>& fixed_gains) const {
   ImageGainSolution out;
   const int nc = channels_;
   const int cols = config_.grid_columns, rows = config_.grid_rows;
@@ -121,6 +122,19 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
     placed.push_back({&id, &levels->second, &placement});
   }
   out.images = static_cast<int>(placed.size());
+  // Unknown of each placed image; -1 for a fixed one, whose log gain is known.
+  std::vector<int> unknown(placed.size(), -1);
+  std::vector<std::array<double, 3>> known_log(placed.size(), std::array<double, 3>{0, 0, 0});
+  int n = 0;
+  for (std::size_t k = 0; k < placed.size(); ++k) {
+    const auto f = fixed_gains.find(*placed[k].id);
+    if (f == fixed_gains.end()) {
+      unknown[k] = n++;
+      continue;
+    }
+    ++out.fixed_images;
+    for (int ch = 0; ch < 3; ++ch) known_log[k][ch] = std::log(std::clamp(f->second[ch], 1e-6, 1e6));
+  }
   if (placed.size() < 2) {
     out.problem = "fewer than two images placed";
     return out;
@@ -181,6 +195,7 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
     for (std::size_t i = 0; i < in_cell.size(); ++i)
       for (std::size_t j = i + 1; j < in_cell.size(); ++j) {
         const int a = std::min(in_cell[i].first, in_cell[j].first), b = std::max(in_cell[i].first, in_cell[j].first);
+        if (unknown[a] < 0 && unknown[b] < 0) continue;  // two known gains: nothing to solve
         const auto& la = in_cell[i].first == a ? in_cell[i].second : in_cell[j].second;
         const auto& lb = in_cell[i].first == a ? in_cell[j].second : in_cell[i].second;
         std::array<double, 3> ratio{0, 0, 0};
@@ -201,9 +216,8 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
   }
 
   // Normal equations per channel: (x_a - x_b - r_ab) with weight cells / cell_sigma^2, x_a with weight
-  // (the image's common cells) / gain_sigma^2.
-  const int n = static_cast<int>(placed.size());
-  std::vector<double> image_cells(n, 0.0);
+  // (the image's common cells) / gain_sigma^2; a fixed image's x moves to the right-hand side.
+  std::vector<double> image_cells(placed.size(), 0.0);
   std::vector<std::pair<std::pair<int, int>, PairSums*>> used;
   for (auto& [key, p] : pairs) {
     if (p.cells < config_.min_common_cells) continue;
@@ -214,7 +228,7 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
   }
   out.pairs = static_cast<int>(used.size());
   if (used.empty()) {
-    out.problem = "no two images overlap on enough cells";
+    out.problem = n == 0 ? "every image placed has a fixed gain" : "no two images overlap on enough cells";
     return out;
   }
   const double wc = 1.0 / (config_.cell_sigma * config_.cell_sigma);
@@ -223,12 +237,16 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
   triplets.reserve(used.size() * 4 + n);
   for (const auto& [ab, p] : used) {
     const double w = wc * p->cells;
-    triplets.emplace_back(ab.first, ab.first, w);
-    triplets.emplace_back(ab.second, ab.second, w);
-    triplets.emplace_back(ab.first, ab.second, -w);
-    triplets.emplace_back(ab.second, ab.first, -w);
+    const int ua = unknown[ab.first], ub = unknown[ab.second];
+    if (ua >= 0) triplets.emplace_back(ua, ua, w);
+    if (ub >= 0) triplets.emplace_back(ub, ub, w);
+    if (ua >= 0 && ub >= 0) {
+      triplets.emplace_back(ua, ub, -w);
+      triplets.emplace_back(ub, ua, -w);
+    }
   }
-  for (int k = 0; k < n; ++k) triplets.emplace_back(k, k, wg * std::max(1.0, image_cells[k]));
+  for (std::size_t k = 0; k < placed.size(); ++k)
+    if (unknown[k] >= 0) triplets.emplace_back(unknown[k], unknown[k], wg * std::max(1.0, image_cells[k]));
   Eigen::SparseMatrix<double> a(n, n);
   a.setFromTriplets(triplets.begin(), triplets.end());
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(a);
@@ -241,17 +259,23 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
   std::vector<std::array<double, 3>> pair_ratio(used.size(), std::array<double, 3>{0, 0, 0});
   for (std::size_t i = 0; i < used.size(); ++i)
     for (int ch = 0; ch < nc; ++ch) pair_ratio[i][ch] = median(used[i].second->log_ratio[ch]);
-  std::vector<std::array<double, 3>> gains(n, std::array<double, 3>{1.0, 1.0, 1.0});
+  std::vector<std::array<double, 3>> gains(placed.size(), std::array<double, 3>{1.0, 1.0, 1.0});
+  for (std::size_t k = 0; k < placed.size(); ++k)
+    if (unknown[k] < 0)
+      for (int ch = 0; ch < 3; ++ch) gains[k][ch] = std::exp(known_log[k][ch]);
   for (int ch = 0; ch < nc; ++ch) {
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
     for (std::size_t i = 0; i < used.size(); ++i) {
       const auto& [ab, p] = used[i];
-      const double r = pair_ratio[i][ch];
-      rhs[ab.first] += wc * p->cells * r;
-      rhs[ab.second] -= wc * p->cells * r;
+      const double w = wc * p->cells, r = pair_ratio[i][ch];
+      const int ua = unknown[ab.first], ub = unknown[ab.second];
+      // x_a - x_b = r: a known x_b adds (r + x_b) to a's side, a known x_a adds (x_a - r) to b's.
+      if (ua >= 0) rhs[ua] += w * (ub >= 0 ? r : r + known_log[ab.second][ch]);
+      if (ub >= 0) rhs[ub] += w * (ua >= 0 ? -r : known_log[ab.first][ch] - r);
     }
     const Eigen::VectorXd x = ldlt.solve(rhs);
-    for (int k = 0; k < n; ++k) gains[k][ch] = std::clamp(std::exp(x[k]), 1.0 / config_.max_gain, config_.max_gain);
+    for (std::size_t k = 0; k < placed.size(); ++k)
+      if (unknown[k] >= 0) gains[k][ch] = std::clamp(std::exp(x[unknown[k]]), 1.0 / config_.max_gain, config_.max_gain);
   }
   for (const auto& [ab, p] : used) {
     double before = 0, after = 0;
@@ -263,8 +287,8 @@ ImageGainSolution ImageGains::solve(const std::map<std::string, ImagePlacement>&
     out.step_before_grey = std::max(out.step_before_grey, std::abs(before));
     out.step_after_grey = std::max(out.step_after_grey, std::abs(after));
   }
-  for (int k = 0; k < n; ++k)
-    if (image_cells[k] > 0) out.gain[*placed[k].id] = gains[k];
+  for (std::size_t k = 0; k < placed.size(); ++k)
+    if (unknown[k] >= 0 && image_cells[k] > 0) out.gain[*placed[k].id] = gains[k];
   return out;
 }
 

@@ -119,6 +119,10 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
              "solve a gain per kept image over all overlaps and draw the tiles again with them");
   p.readDouble("image_gain_redraw_change", &c.image_gain_redraw_change, 0.001, 1.0,
                "relative change of an image's gain that makes its tile drawn again");
+  p.readInt("image_gain_window_tiles", &c.image_gain_window_tiles, 0, 100000,
+            "newest tiles whose images' gains each solve takes (0: every tile)");
+  p.readInt("image_gain_levels_cache_tiles", &c.image_gain_levels_cache_tiles, 1, 100000,
+            "tiles whose image levels stay in memory");
   p.readBool("mosaic_vrt", &c.mosaic_vrt, "keep a GDAL virtual mosaic over the newest tiles");
   if (!c.graph_corrections_topic.empty()) c.keep_images = true;
   if (!c.keep_images) c.image_gain_compensation = false;  // the gains draw the kept images

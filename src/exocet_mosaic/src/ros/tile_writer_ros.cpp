@@ -946,9 +946,15 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   }
   std::optional<std::map<std::string, std::array<double, 3>>> gains;
   if (config_.image_gain_compensation) gains = solveImageGains(*lighting, every_tile);
-  const auto gain_change = [&](const tiles::RecordedImage& image) {
+  // The gain an image of a tile is drawn with from now on: the solution's for a tile the last solve took (1 for an
+  // image it left without a gain), unchanged for the others.
+  const auto gain_now = [&](int tile, const tiles::RecordedImage& image) {
+    if (!image_gain_tiles_.count(tile)) return image.gain;
     const auto g = gains->find(image.file);
-    const std::array<double, 3> now = g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+    return g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+  };
+  const auto gain_change = [&](int tile, const tiles::RecordedImage& image) {
+    const std::array<double, 3> now = gain_now(tile, image);
     double change = 0;
     for (int c = 0; c < 3; ++c) change = std::max(change, std::abs(now[c] / image.gain[c] - 1.0));
     return change;
@@ -963,7 +969,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
       double largest_gain_change = 0.0;
       if (gains)
         for (const tiles::RecordedImage& image : record.images)
-          largest_gain_change = std::max(largest_gain_change, gain_change(image));
+          largest_gain_change = std::max(largest_gain_change, gain_change(index, image));
       const bool relit = largest_gain_change > config_.image_gain_redraw_change;
       // Drawing it failed with these corrections: tried again with the next ones, or new gains (solved only when
       // images were added).
@@ -994,10 +1000,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return urgency[a] > urgency[b]; });
   if (gains)
     for (tiles::TileRecord& record : due)
-      for (tiles::RecordedImage& image : record.images) {
-        const auto g = gains->find(image.file);
-        image.gain = g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
-      }
+      for (tiles::RecordedImage& image : record.images) image.gain = gain_now(record.index, image);
   compose::PlacedImageRenderConfig render;
   render.blend = config_.composer.blend;
   render.feather_power = config_.composer.feather_power;
@@ -1062,27 +1065,101 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
     std::lock_guard<std::mutex> lock(image_gains_mutex_);
     if (!always && image_levels_added_ == image_levels_solved_) return image_gain_;
   }
+  // The newest tiles solved against the gains the older tiles under them were drawn with: the solve's size does not
+  // grow with the dive.
+  tiles::GainWindow window;
   std::map<std::string, compose::ImagePlacement> placements;
+  std::map<std::string, std::array<double, 3>> fixed;
+  std::set<std::string> solved_files, window_files;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
+    window = tiles::gainWindow(records_, config_.image_gain_window_tiles);
     const cv::Size grid(image_gains_.config().grid_columns, image_gains_.config().grid_rows);
-    for (const auto& [index, record] : records_) tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
+    for (const int index : window.solved) {
+      const tiles::TileRecord& record = records_.at(index);
+      tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
+      for (const tiles::RecordedImage& image : record.images) solved_files.insert(image.file);
+    }
+    for (const int index : window.anchors) {
+      const tiles::TileRecord& record = records_.at(index);
+      tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
+      for (const tiles::RecordedImage& image : record.images)
+        if (!solved_files.count(image.file)) fixed[image.file] = image.gain;  // consecutive tiles share an image
+    }
   }
+  for (const auto& [file, placement] : placements) window_files.insert(file);
+  readBackLevels(window_files);
   const auto start = std::chrono::steady_clock::now();
   compose::ImageGainSolution solution;
   {
     std::lock_guard<std::mutex> lock(image_gains_mutex_);
     image_levels_solved_ = image_levels_added_;
-    solution = image_gains_.solve(placements);
+    solution = image_gains_.solve(placements, fixed);
   }
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  if (solution.problem.empty()) image_gain_ = std::move(solution.gain);
+  if (config_.image_gain_window_tiles > 0) letGoOfLevels(window, window_files);
+  if (solution.problem.empty()) {
+    image_gain_ = std::move(solution.gain);
+    image_gain_tiles_ = std::set<int>(window.solved.begin(), window.solved.end());
+  }
   solution.gain.clear();
   std::lock_guard<std::mutex> lock(write_mutex_);
   ++image_gain_solves_;
   last_image_gain_ms_ = ms;
   last_image_gains_ = solution;
   return image_gain_;
+}
+
+void TileWriterRos::readBackLevels(const std::set<std::string>& files) {
+  std::vector<std::string> missing;
+  {
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    for (const std::string& file : files)
+      if (!image_gains_.contains(file)) missing.push_back(file);
+  }
+  const compose::ImageGainsConfig& g = image_gains_.config();
+  int read = 0;
+  for (const std::string& file : missing) {
+    const cv::Mat image = cv::imread(images_dir_ + "/" + file, cv::IMREAD_UNCHANGED);
+    if (image.empty()) continue;  // left out of the solve (its tile is drawn without it too)
+    compose::ImageLevels levels = compose::imageLevels(image, g.grid_columns, g.grid_rows);
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    if (image_gains_.add(file, std::move(levels))) ++read;
+  }
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  levels_read_back_ += read;
+}
+
+void TileWriterRos::letGoOfLevels(const tiles::GainWindow& window, const std::set<std::string>& window_files) {
+  if (!levels_cache_) levels_cache_ = std::make_unique<tiles::TileLevelsCache>(config_.image_gain_levels_cache_tiles);
+  std::vector<int> used = window.solved;
+  used.insert(used.end(), window.anchors.begin(), window.anchors.end());
+  const std::vector<int> let_go = levels_cache_->use(used);
+  if (let_go.empty()) return;
+  std::vector<std::string> files;
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    for (const int index : let_go) {
+      const auto record = records_.find(index);
+      if (record == records_.end()) continue;
+      for (const tiles::RecordedImage& image : record->second.images) {
+        // An image a tile still in the cache shares stays (its levels are read back anyway if it goes).
+        if (window_files.count(image.file)) continue;
+        files.push_back(image.file);
+      }
+    }
+  }
+  std::int64_t removed = 0;
+  {
+    std::lock_guard<std::mutex> lock(image_gains_mutex_);
+    for (const std::string& file : files)
+      if (image_gains_.contains(file)) {
+        image_gains_.remove(file);
+        ++removed;
+      }
+  }
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  levels_let_go_ += removed;
 }
 
 int TileWriterRos::adjustWrittenTiles() {
@@ -1322,8 +1399,17 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.add("images not kept", images_not_kept_);
     if (config_.image_gain_compensation) {
       status.add("image gain solves", image_gain_solves_);
-      status.add("images with a gain", last_image_gains_.images);
+      status.add("images in the last gain solve", last_image_gains_.images);
+      status.add("of which anchors (gains as drawn)", last_image_gains_.fixed_images);
       status.add("overlapping image pairs", last_image_gains_.pairs);
+      std::size_t levels_in_memory = 0;
+      {
+        std::lock_guard<std::mutex> gains_lock(image_gains_mutex_);
+        levels_in_memory = image_gains_.size();
+      }
+      status.add("image levels in memory", levels_in_memory);
+      status.add("image levels read back / let go",
+                 std::to_string(levels_read_back_) + " / " + std::to_string(levels_let_go_));
       status.addf("largest level step between images (grey, before -> after their gains)", "%.1f -> %.1f",
                   last_image_gains_.step_before_grey, last_image_gains_.step_after_grey);
       status.addf("last image gain solve (ms)", "%.1f", last_image_gain_ms_);
@@ -1417,7 +1503,8 @@ void TileWriterRos::continueRun(const tiles::TileWriterProgress& previous, bool 
       if (adopted > 0) tiles_changed_since_adjustment_ = true;
     }
   }
-  if (adopt_tiles && config_.image_gain_compensation) {
+  // A solve of the whole dive needs every image's levels; a windowed one reads back those it takes.
+  if (adopt_tiles && config_.image_gain_compensation && config_.image_gain_window_tiles == 0) {
     std::vector<std::string> files;
     {
       std::lock_guard<std::mutex> lock(write_mutex_);

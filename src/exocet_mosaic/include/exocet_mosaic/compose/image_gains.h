@@ -59,7 +59,8 @@ struct ImagePlacement {
 /// What ImageGains::solve() found.
 struct ImageGainSolution {
   std::map<std::string, std::array<double, 3>> gain;  ///< per image id, per channel (BGR; grey: [0])
-  int images = 0;                                     ///< images placed
+  int images = 0;                                     ///< images placed (fixed ones included)
+  int fixed_images = 0;                               ///< of those, the ones whose gains were given
   int pairs = 0;                                      ///< pairs of images with enough common cells
   double cell_size_m = 0;
   /// Largest |mean level difference| (grey) over the pairs, before and after the gains (pairs measured on their
@@ -96,8 +97,14 @@ class ImageGains {
    * weighted by its common cells), plus the prior towards log g = 0; a sparse Cholesky solve. Images not placed, or
    * without overlap, get no entry (their gain is 1).
    * @param placements per image id; ids without levels are ignored
+   * @param fixed_gains images whose gains are known (per image id, per channel): they take part in the pairs with the
+   * other images as anchors but are not solved, and get no entry in the solution; pairs of two fixed images are left
+   * out. A live dive solves its newest images against the gains already given to their older neighbours, so that the
+   * solve's size does not grow with the dive. With every fixed gain at the value of a solve of all the images, the
+   * others get the values of that solve (the least squares are the same).
    */
-  ImageGainSolution solve(const std::map<std::string, ImagePlacement>& placements) const;
+  ImageGainSolution solve(const std::map<std::string, ImagePlacement>& placements,
+                          const std::map<std::string, std::array<double, 3>>& fixed_gains = {}) const;
 
  private:
   ImageGainsConfig config_;

@@ -82,6 +82,13 @@ struct TileWriterNodeConfig {
   /// its images' gains instead of a tile gain.
   bool image_gain_compensation = true;
   double image_gain_redraw_change = 0.01;  ///< relative change of an image's gain, [0.001, 1]
+  /// Tiles whose images' gains each solve takes, the newest, [0, 100000]; the older tiles they overlap are anchors
+  /// (their images keep the gains they were drawn with), the others stay as drawn: the solve's time and memory do not
+  /// grow with the dive (tiles::gainWindow). 0: every tile at each solve.
+  int image_gain_window_tiles = 8;
+  /// Tiles whose image levels stay in memory, the most recently used, [1, 100000]; the others are read back from the
+  /// kept images when a solve takes them again. Not used with image_gain_window_tiles 0.
+  int image_gain_levels_cache_tiles = 48;
   /// <output_dir>/<prefix>_mosaic.vrt: a GDAL virtual mosaic over the newest version of every tile (one layer for a
   /// GIS), rewritten atomically at most every 2 s as tiles are written or drawn again, and at shutdown.
   bool mosaic_vrt = true;

@@ -62,6 +62,7 @@
 #include "exocet_mosaic/ros/keyed_throttle.h"
 #include "exocet_mosaic/ros/tile_writer_parameters.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/image_gain_window.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
 #include "exocet_mosaic/tiles/tile_writer_resume.h"
@@ -123,6 +124,11 @@ class TileWriterRos {
   /// current placements and the lighting given; @return the new gains per image file, nullopt if not solved.
   std::optional<std::map<std::string, std::array<double, 3>>> solveImageGains(
       const compose::LightingCorrector& lighting, bool always);
+  /// Rerender thread: the levels of those kept images that are not in image_gains_, read back from their files.
+  void readBackLevels(const std::set<std::string>& files);
+  /// Rerender thread: marks the window's tiles used and drops the levels of the tiles least recently used beyond
+  /// ~image_gain_levels_cache_tiles (but not those of `window_files`).
+  void letGoOfLevels(const tiles::GainWindow& window, const std::set<std::string>& window_files);
   void saveCorrections();
   /// <images_dir_>/<prefix>_NNNN.json, atomically; a failure is logged (the tile stays, not its redrawing).
   void saveRecord(const tiles::TileRecord& record, const tiles::GeoTiffTileWriter& writer);
@@ -242,12 +248,16 @@ class TileWriterRos {
   bool redraws_ = false;  ///< the rerender thread runs (graph corrections, or image gains)
   // Gains of the kept images.
   std::mutex image_gains_mutex_;
-  compose::ImageGains image_gains_;                          ///< levels of the kept images (image_gains_mutex_)
-  std::int64_t image_levels_added_ = 0;                      ///< (image_gains_mutex_)
-  std::int64_t image_levels_solved_ = -1;                    ///< rerender thread
-  std::map<std::string, std::array<double, 3>> image_gain_;  ///< last solution by image file (rerender thread)
-  compose::ImageGainSolution last_image_gains_;              ///< its figures, gains left out (write_mutex_)
-  double last_image_gain_ms_ = 0;                            ///< (write_mutex_)
+  compose::ImageGains image_gains_;        ///< levels of the kept images (image_gains_mutex_)
+  std::int64_t image_levels_added_ = 0;    ///< (image_gains_mutex_)
+  std::int64_t image_levels_solved_ = -1;  ///< rerender thread
+  /// The last solution by image file, of the images of the tiles it solved (rerender thread).
+  std::map<std::string, std::array<double, 3>> image_gain_;
+  std::set<int> image_gain_tiles_;                         ///< the tiles it solved (rerender thread)
+  std::unique_ptr<tiles::TileLevelsCache> levels_cache_;   ///< tiles whose levels are in image_gains_ (rerender thread)
+  std::int64_t levels_read_back_ = 0, levels_let_go_ = 0;  ///< images' levels (write_mutex_)
+  compose::ImageGainSolution last_image_gains_;            ///< its figures, gains left out (write_mutex_)
+  double last_image_gain_ms_ = 0;                          ///< (write_mutex_)
   std::int64_t image_gain_solves_ = 0, tiles_redrawn_for_gains_ = 0;  ///< (write_mutex_)
 
   // A run carried over restarts.
