@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/free_heap.h"
 #include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/fusion/rts_smoother.h"
@@ -120,6 +121,9 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
   diagnostics_timer_ = nh_.createSteadyTimer(ros::WallDuration(period_s),
                                              [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  // Hours of short-lived large buffers in several threads: their freed pages go back to the system.
+  free_heap_timer_ = nh_.createSteadyTimer(ros::WallDuration(kFreeHeapPeriod_s),
+                                           [](const ros::SteadyTimerEvent&) { exocet_common::releaseFreeHeap(); });
   path_timer_ = nh_.createSteadyTimer(ros::WallDuration(1.0 / config_.path_rate_hz),
                                       [this](const ros::SteadyTimerEvent&) { publishPaths(); });
   last_nav_wall_ = last_motion_wall_ = ros::WallTime::now();

@@ -18,6 +18,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/free_heap.h"
 #include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
 #include "exocet_mosaic/ros/image_message_decoder.h"
@@ -128,6 +129,9 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   const double period_s = updater_.getPeriod() > 0.0 ? updater_.getPeriod() : 1.0;
   diagnostics_timer_ = nh_.createSteadyTimer(ros::WallDuration(period_s),
                                              [this](const ros::SteadyTimerEvent&) { updater_.force_update(); });
+  // Hours of short-lived large buffers in several threads: their freed pages go back to the system.
+  free_heap_timer_ = nh_.createSteadyTimer(ros::WallDuration(kFreeHeapPeriod_s),
+                                           [](const ros::SteadyTimerEvent&) { exocet_common::releaseFreeHeap(); });
   timer_ = nh_.createSteadyTimer(ros::WallDuration(0.1), [this](const ros::SteadyTimerEvent&) { onTimer(); });
   last_input_wall_ = ros::WallTime::now();
   ROS_INFO("tile writer: %s -> %s/%s_NNNN.tif, %d images per mosaic, %s blending", config_.image_topic.c_str(),

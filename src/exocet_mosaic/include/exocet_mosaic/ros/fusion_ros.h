@@ -183,6 +183,8 @@ class FusionRos {
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
   diagnostic_updater::Updater updater_;
   ros::SteadyTimer diagnostics_timer_, path_timer_;
+  ros::SteadyTimer free_heap_timer_;
+  static constexpr double kFreeHeapPeriod_s = 10.0;
 
   // Geography.
   std::optional<exocet_common::UtmGrid> grid_;

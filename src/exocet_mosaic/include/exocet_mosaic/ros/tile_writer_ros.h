@@ -178,6 +178,8 @@ class TileWriterRos {
   ros::Publisher tile_pub_, footprints_pub_;
   ros::ServiceServer flush_srv_;
   ros::SteadyTimer timer_, diagnostics_timer_;
+  ros::SteadyTimer free_heap_timer_;
+  static constexpr double kFreeHeapPeriod_s = 10.0;
   diagnostic_updater::Updater updater_;
   std::unique_ptr<dynamic_reconfigure::Server<exocet_mosaic::TileWriterConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;  // dynamic_reconfigure wants a boost mutex
