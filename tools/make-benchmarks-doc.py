@@ -866,7 +866,10 @@ BENCHMARKS = {
             'their /diagnostics).',
             'Every 2 s of wall time each node\'s resident memory (VmRSS) and CPU time (user + system) are sampled '
             'against the dive time the registration has reached. Memory slope: least-squares line through the '
-            'samples after the warm-up (10 minutes of dive), in MB per 10 minutes of dive. CPU per frame: the CPU '
+            'samples from the warm-up (10 minutes of dive) to the last frame, in MB per 10 minutes of dive (the '
+            'samples after it, when the nodes finish and free what they held, left out). Floor slope: the same line '
+            'through the lowest sample of each 5 minutes, what a node keeps between its bursts of work (tiles drawn '
+            'again, loops verified). CPU per frame: the CPU '
             'time over the frames registered, per 10-minute stretch of the dive.',
             'Landmarks: the checker targets found in the tiles made of the first and of the last 10 minutes of the '
             'dive, their error against the simulator\'s truth.',
@@ -885,6 +888,8 @@ BENCHMARKS = {
             ('chain_fps', 'frames per second through the chain'),
             ('rss_slope_mb_per_10min_max', 'largest memory slope of a node after the warm-up (MB per 10 min of dive)'),
             ('rss_slope_mb_per_10min', 'memory slope after the warm-up (MB per 10 min of dive)'),
+            ('rss_floor_slope_mb_per_10min_max', 'largest slope of a node\'s lowest memory per 5 min (MB per 10 min)'),
+            ('rss_floor_slope_mb_per_10min', 'slope of the lowest memory per 5 min of dive (MB per 10 min of dive)'),
             ('rss_mb_at_warm_up_end', 'resident memory at the end of the warm-up (MB)'),
             ('rss_mb_at_end', 'resident memory at the end of the dive (MB)'),
             ('rss_mb_max', 'peak resident memory (MB)'),
