@@ -856,8 +856,9 @@ BENCHMARKS = {
                     'the start and at the end.',
         'data': 'config/dives/soak_pal.yaml rendered once into out/bench/cache/soak_pal.bag: PAL (720x576) at 10 '
                 'frames/s, a 25-line lawnmower of 72 m lines 1.6 m apart at 2.5 m altitude over a flat seabed (each '
-                'line overlaps its neighbours: the pose graph finds loops all dive long), USBL 0.5 m at 1 Hz, 40 '
-                'checker landmarks along the track.',
+                'line overlaps its neighbours: the pose graph finds loops all dive long), USBL 0.5 m at 1 Hz, the '
+                'heading of a fibre-optic gyro (0.2 deg/h, as on a work-class ROV), 40 checker landmarks along the '
+                'track.',
         'method': [
             'The whole chain of replay.launch (registration, fusion with its pose graph and live loop closure, tile '
             'writer, web map) on a private ROS master, the bag played at the rate tried first (8x), then slower '
