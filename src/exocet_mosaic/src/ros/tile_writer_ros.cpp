@@ -1082,7 +1082,8 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
     for (const int index : window.solved) {
       const tiles::TileRecord& record = records_.at(index);
       tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
-      for (const tiles::RecordedImage& image : record.images) solved_files.insert(image.file);
+      if (!window.anchors.empty())
+        for (const tiles::RecordedImage& image : record.images) solved_files.insert(image.file);
     }
     for (const int index : window.anchors) {
       const tiles::TileRecord& record = records_.at(index);
@@ -1091,8 +1092,13 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
         if (!solved_files.count(image.file)) fixed[image.file] = image.gain;  // consecutive tiles share an image
     }
   }
-  for (const auto& [file, placement] : placements) window_files.insert(file);
-  readBackLevels(window_files);
+  if (config_.image_gain_window_tiles > 0) {
+    // The levels of the window's images that were let go, read back (a solve of every tile has them all).
+    for (const auto& [file, placement] : placements) window_files.insert(file);
+    const int read = readKeptLevels(std::vector<std::string>(window_files.begin(), window_files.end()), false, nullptr);
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    levels_read_back_ += read;
+  }
   const auto start = std::chrono::steady_clock::now();
   compose::ImageGainSolution solution;
   {
@@ -1114,24 +1120,28 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
   return image_gain_;
 }
 
-void TileWriterRos::readBackLevels(const std::set<std::string>& files) {
-  std::vector<std::string> missing;
-  {
-    std::lock_guard<std::mutex> lock(image_gains_mutex_);
-    for (const std::string& file : files)
-      if (!image_gains_.contains(file)) missing.push_back(file);
-  }
+int TileWriterRos::readKeptLevels(const std::vector<std::string>& files, bool new_images, int* unreadable) {
   const compose::ImageGainsConfig& g = image_gains_.config();
   int read = 0;
-  for (const std::string& file : missing) {
+  for (const std::string& file : files) {
+    {
+      std::lock_guard<std::mutex> lock(image_gains_mutex_);
+      // Consecutive tiles share an image; a file that could not be read is not tried at every solve.
+      if (image_gains_.contains(file) || levels_unreadable_.count(file)) continue;
+    }
     const cv::Mat image = cv::imread(images_dir_ + "/" + file, cv::IMREAD_UNCHANGED);
-    if (image.empty()) continue;  // left out of the solve (its tile is drawn without it too)
-    compose::ImageLevels levels = compose::imageLevels(image, g.grid_columns, g.grid_rows);
     std::lock_guard<std::mutex> lock(image_gains_mutex_);
-    if (image_gains_.add(file, std::move(levels))) ++read;
+    if (image.empty()) {
+      levels_unreadable_.insert(file);  // left out of the solves (its tile is drawn without it too)
+      if (unreadable) ++*unreadable;
+      continue;
+    }
+    if (image_gains_.add(file, compose::imageLevels(image, g.grid_columns, g.grid_rows))) {
+      ++read;
+      if (new_images) ++image_levels_added_;
+    }
   }
-  std::lock_guard<std::mutex> lock(write_mutex_);
-  levels_read_back_ += read;
+  return read;
 }
 
 void TileWriterRos::letGoOfLevels(const tiles::GainWindow& window, const std::set<std::string>& window_files) {
@@ -1595,27 +1605,10 @@ void TileWriterRos::loadKeptImageLevels() {
     files.swap(levels_to_load_);
   }
   if (files.empty()) return;
-  const compose::ImageGainsConfig& g = image_gains_.config();
-  int loaded = 0, missing = 0;
-  for (const std::string& file : files) {
-    {
-      std::lock_guard<std::mutex> lock(image_gains_mutex_);
-      if (image_gains_.contains(file)) continue;  // consecutive tiles share an image
-    }
-    const cv::Mat image = cv::imread(images_dir_ + "/" + file, cv::IMREAD_UNCHANGED);
-    if (image.empty()) {
-      ++missing;
-      continue;
-    }
-    compose::ImageLevels levels = compose::imageLevels(image, g.grid_columns, g.grid_rows);
-    std::lock_guard<std::mutex> lock(image_gains_mutex_);
-    if (image_gains_.add(file, std::move(levels))) {
-      ++image_levels_added_;
-      ++loaded;
-    }
-  }
+  int unreadable = 0;
+  const int loaded = readKeptLevels(files, true, &unreadable);
   ROS_INFO("tile writer: the gains of %d kept image(s) of the run read back%s", loaded,
-           missing > 0 ? (" (" + std::to_string(missing) + " unreadable)").c_str() : "");
+           unreadable > 0 ? (" (" + std::to_string(unreadable) + " unreadable)").c_str() : "");
 }
 
 // ---------------------------------------------------------------------------------------------------------------

@@ -398,7 +398,6 @@ bool WebMap::waitIdle(std::chrono::milliseconds timeout) {
 }
 
 void WebMap::process(const Job& job) {
-  const auto start = Clock::now();
   tiles::SourceTile source;
   const std::string error = tiles::readSourceTile(job.path, &source);
   if (!error.empty()) {
@@ -511,7 +510,6 @@ void WebMap::process(const Job& job) {
           " warps), finest level announced " + std::to_string(std::lround(latency_ms)) + " ms after it was queued");
   stats_.last_latency_ms = latency_ms;
   stats_.max_latency_ms = std::isnan(stats_.max_latency_ms) ? latency_ms : std::max(stats_.max_latency_ms, latency_ms);
-  (void)start;
 }
 
 std::string WebMap::tileJson(const tiles::SourceTile& s) const {

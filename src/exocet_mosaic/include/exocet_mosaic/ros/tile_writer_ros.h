@@ -124,8 +124,10 @@ class TileWriterRos {
   /// current placements and the lighting given; @return the new gains per image file, nullopt if not solved.
   std::optional<std::map<std::string, std::array<double, 3>>> solveImageGains(
       const compose::LightingCorrector& lighting, bool always);
-  /// Rerender thread: the levels of those kept images that are not in image_gains_, read back from their files.
-  void readBackLevels(const std::set<std::string>& files);
+  /// Rerender thread: the levels of those kept images that are not in image_gains_, read from their files
+  /// (`new_images`: counted as added, so that the gains are solved again). @return how many were read; `unreadable`
+  /// (optional) counts the files that could not be
+  int readKeptLevels(const std::vector<std::string>& files, bool new_images, int* unreadable);
   /// Rerender thread: marks the window's tiles used and drops the levels of the tiles least recently used beyond
   /// ~image_gain_levels_cache_tiles (but not those of `window_files`).
   void letGoOfLevels(const tiles::GainWindow& window, const std::set<std::string>& window_files);
@@ -277,6 +279,7 @@ class TileWriterRos {
   std::int64_t progress_failures_ = 0;       ///< (progress_mutex_)
   std::string last_progress_error_;          ///< (progress_mutex_)
   std::vector<std::string> levels_to_load_;  ///< kept images whose levels the gains need (image_gains_mutex_)
+  std::set<std::string> levels_unreadable_;  ///< kept images whose file could not be read (image_gains_mutex_)
 
   // Counters for /diagnostics.
   std::atomic<std::int64_t> images_{0};
