@@ -162,6 +162,85 @@ TEST(TileRevisions, TheTileBendsWithTheGraphPerImage) {
   EXPECT_LT(worst_image, 0.5 * worst_tile);
 }
 
+namespace {
+
+/// Where a placement lays the image's +x axis at its centre (rad, counter-clockwise from east).
+double contentDirectionRad(const cv::Matx33d& ground_from_px) {
+  return exocet_mosaic::compose::imageXDirectionRad(ground_from_px, Eigen::Vector2d(31.5, 23.5));
+}
+
+/// lineTile(n) whose chain turned image i's content by drift_rad(i) about its centre, while the poses' headings say
+/// every image lies east (0 rad), as it does.
+template <typename Drift>
+et::TileRecord driftedLineTile(int n, Drift drift_rad) {
+  et::TileRecord record = lineTile(n);
+  for (int i = 0; i < n; ++i) {
+    et::RecordedImage& image = record.images[i];
+    const Eigen::Vector2d g = centreAt(image.closed_ground_from_px);
+    const double a = drift_rad(i), c = std::cos(a), s = std::sin(a);
+    const cv::Matx33d turn(c, -s, g.x() - c * g.x() + s * g.y(), s, c, g.y() - s * g.x() - c * g.y(), 0, 0, 1);
+    image.closed_ground_from_px = image.ground_from_px = turn * image.closed_ground_from_px;
+    image.closed_navigation_heading_rad = 0.0;
+  }
+  return record;
+}
+
+}  // namespace
+
+TEST(TileRevisions, TheImagesTurnBackToTheirHeadingsFromTheChainsDrift) {
+  // The chain's rotation drifted by 1 mrad per image (20 mrad over the tile); the heading sensor did not.
+  const et::TileRecord record = driftedLineTile(21, [](int i) { return 0.001 * (i - 10); });
+  et::RevisionConfig per_image, smoothed, chain_kept;
+  per_image.heading_window_images = 1;
+  chain_kept.heading_window_images = 0;
+  const auto track = constantTrack(Eigen::Vector2d(0.01, 0.0));
+  const auto a = et::placementsAt(record, track, per_image), b = et::placementsAt(record, track, smoothed),
+             c = et::placementsAt(record, track, chain_kept);
+  double worst_smoothed = 0;
+  for (int i = 0; i < 21; ++i) {
+    EXPECT_NEAR(contentDirectionRad(a[i]), 0.0, 1e-6) << i;
+    worst_smoothed = std::max(worst_smoothed, std::abs(contentDirectionRad(b[i])));
+    EXPECT_NEAR(contentDirectionRad(c[i]), 0.001 * (i - 10), 1e-6) << i;
+    // The centres go where the graph says, turned or not.
+    EXPECT_NEAR((centreAt(a[i]) - centreAt(c[i])).norm(), 0.0, 1e-6) << i;
+  }
+  // The default window (9) averages the drift over the neighbours: exact inside, 2 mrad off at the tile's ends
+  // (a one-sided window there).
+  EXPECT_LT(worst_smoothed, 0.0025);
+  EXPECT_GT(et::tileDisplacementM(record, constantTrack(Eigen::Vector2d::Zero()), per_image), 0.0005);
+}
+
+TEST(TileRevisions, AGraphThatTurnsTheTrackMovesTheImagesWithoutTurningThem) {
+  // The graph's correction grows across the tile (the track turns by 5 mrad); the headings say the images lie east.
+  const et::TileRecord record = driftedLineTile(21, [](int) { return 0.0; });
+  et::PositionCorrectionTrack track;
+  std::vector<double> stamps;
+  std::vector<Eigen::Vector2d> values;
+  for (int i = 0; i < 21; ++i) {
+    stamps.push_back(100.0 + i);
+    values.emplace_back(0.0, 0.005 * 0.2 * (i - 10));
+  }
+  track.set(stamps, values);
+  et::RevisionConfig follows_heading, chain_kept;
+  chain_kept.heading_window_images = 0;
+  const auto a = et::placementsAt(record, track, follows_heading), c = et::placementsAt(record, track, chain_kept);
+  for (int i = 0; i < 21; ++i) {
+    const Eigen::Vector2d target = *record.images[i].closed_navigation_m + values[i];
+    EXPECT_LT((centreAt(a[i]) - target).norm(), 0.1 * kGsd) << i;  // the rotation prior holds back a little
+    EXPECT_NEAR(contentDirectionRad(a[i]), 0.0, 1e-6) << i;
+    EXPECT_GT(contentDirectionRad(c[i]), 0.002) << i;  // the similarity turned them with the track
+  }
+}
+
+TEST(TileRevisions, AHeadingFarFromTheOthersIsLeftOut) {
+  et::TileRecord record = driftedLineTile(9, [](int) { return 0.0; });
+  record.images[4].closed_navigation_heading_rad = 0.5;  // a wrong pose: 0.5 rad from the others
+  et::RevisionConfig per_image;
+  per_image.heading_window_images = 1;
+  const auto a = et::placementsAt(record, constantTrack(Eigen::Vector2d::Zero()), per_image);
+  for (int i = 0; i < 9; ++i) EXPECT_NEAR(contentDirectionRad(a[i]), 0.0, 1e-6) << i;
+}
+
 TEST(TileRevisions, TheTileDrawnAgainIsTheSamePixelsMovedByTheCorrection) {
   TempDir dir;
   et::TileRecord record = lineTile(5);
@@ -209,8 +288,12 @@ TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
   et::TileRecord record = lineTile(3);
   record.images[1].closed_navigation_m.reset();
   record.images[2].gain = {1.1, 0.9, 1.05};
+  record.images[2].closed_navigation_heading_rad = -0.25;
   record.metadata.extra["blend"] = "feather";
   const et::TileRecord back = et::tileRecordFromJson(et::tileRecordToJson(record));
+  EXPECT_FALSE(back.images[0].closed_navigation_heading_rad.has_value());
+  ASSERT_TRUE(back.images[2].closed_navigation_heading_rad.has_value());
+  EXPECT_EQ(*back.images[2].closed_navigation_heading_rad, -0.25);
   ASSERT_EQ(back.images.size(), 3u);
   EXPECT_EQ(back.index, 3);
   EXPECT_FALSE(back.images[1].closed_navigation_m.has_value());

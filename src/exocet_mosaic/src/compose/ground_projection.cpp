@@ -65,6 +65,12 @@ Eigen::Vector2d applyHomography(const cv::Matx33d& h, const Eigen::Vector2d& p) 
   return Eigen::Vector2d(x / z, y / z);
 }
 
+double imageXDirectionRad(const cv::Matx33d& ground_from_px, const Eigen::Vector2d& at_px) {
+  const Eigen::Vector2d d = applyHomography(ground_from_px, at_px + Eigen::Vector2d(0.5, 0.0)) -
+                            applyHomography(ground_from_px, at_px - Eigen::Vector2d(0.5, 0.0));
+  return std::atan2(d.y(), d.x());
+}
+
 cv::Matx33d normalizeHomography(const cv::Matx33d& h) {
   const double s = h(2, 2);
   if (std::abs(s) < 1e-300) return h;

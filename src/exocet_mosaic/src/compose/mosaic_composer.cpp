@@ -96,10 +96,12 @@ struct OpenMosaic {
     cv::Mat image;
     cv::Matx33d local_from_px;
     std::optional<Eigen::Vector2d> navigation_m;  // where the image's own pose puts its centre (ground - ref)
+    std::optional<double> navigation_heading_rad;  // and how it orients the image's x axis there
   };
   std::vector<Composed> composed;  // config.keep_composed_images: what was drawn, for ClosedMosaic::images
   std::size_t composed_bytes = 0;
   std::optional<Eigen::Vector2d> pending_navigation;  // the pending image's centre from its pose
+  std::optional<double> pending_navigation_heading_rad;
   bool all_kept = true;
   std::size_t kept_bytes = 0;
 
@@ -195,7 +197,7 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, i
     cv::Mat kept = raw;  // before the lighting correction (ComposedImage::image)
     if (kept.channels() != m.channels)
       cv::cvtColor(raw, kept, m.channels == 3 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGR2GRAY);
-    m.composed.push_back({frame_index, stamp_s, kept, local_from_px});
+    m.composed.push_back({frame_index, stamp_s, kept, local_from_px, std::nullopt, std::nullopt});
     m.composed_bytes += kept.total() * kept.elemSize();
   }
   m.canvas.accumulateAlpha(warped, roi.tl(), replace);
@@ -338,6 +340,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
   const cv::Size size = image_size;
   const Eigen::Vector2d centre_px = imageCentre(size);
   std::optional<AnchorPoint> point;
+  std::optional<double> point_heading_rad;  // the image's x axis on the ground by its pose, with point
   if (has_pose && !bridged) {
     AnchorPoint p;
     p.local_m = applyHomography(m.p_first * chain, centre_px);
@@ -372,6 +375,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
       return closed;
     } else {
       point = p;
+      point_heading_rad = imageXDirectionRad(p_frame, centre_px);
     }
   }
 
@@ -395,12 +399,15 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     if (materialize()) {
       observeLighting();
       composeImage(m, frame.image, chain, frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
-      if (point && !m.composed.empty() && m.composed.back().index == frame.index)
+      if (point && !m.composed.empty() && m.composed.back().index == frame.index) {
         m.composed.back().navigation_m = point->measured_m;
+        m.composed.back().navigation_heading_rad = point_heading_rad;
+      }
     }
   } else {
     m.pending = true;
     m.pending_navigation = point ? std::optional<Eigen::Vector2d>(point->measured_m) : std::nullopt;
+    m.pending_navigation_heading_rad = point_heading_rad;
     m.pending_chain = chain;
     if (!frame.image.empty()) {
       frame.image.copyTo(m.pending_image);  // a copy: the caller may reuse its buffer
@@ -487,6 +494,7 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
   m->frames_added = 1;
   m->last_size = size;
   std::optional<Eigen::Vector2d> first_navigation;
+  std::optional<double> first_navigation_heading_rad;
   if (from_pose) {
     m->height_sum_m = frame.pose->camera_height_m;
     m->height_count = 1;
@@ -496,6 +504,7 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
     m->points.push_back(p);
     m->running.add(p);
     first_navigation = p.measured_m;
+    first_navigation_heading_rad = imageXDirectionRad(m->p_first, centre_px);
   }
   if (continued && s.tie.valid && s.tie.points_utm.size() == tieGrid(size).size()) {
     // Tied with the continuity slack only: the tiles stay aligned; the closed tile's own uncertainty enters the
@@ -516,7 +525,10 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
   }
   s.tie.valid = false;
   composeImage(*m, frame.image, cv::Matx33d::eye(), frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
-  if (!m->composed.empty()) m->composed.back().navigation_m = first_navigation;
+  if (!m->composed.empty()) {
+    m->composed.back().navigation_m = first_navigation;
+    m->composed.back().navigation_heading_rad = first_navigation_heading_rad;
+  }
   s.open = std::move(m);
   s.previous_in_chain = true;
 }
@@ -533,8 +545,10 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   if (m.pending && !m.pending_image.empty()) {
     composeImage(m, m.pending_image, m.pending_chain, m.last_frame, m.end_time_s, config_, s.lighting, s.feather,
                  s.stats);
-    if (!m.composed.empty() && m.composed.back().index == m.last_frame)
+    if (!m.composed.empty() && m.composed.back().index == m.last_frame) {
       m.composed.back().navigation_m = m.pending_navigation;
+      m.composed.back().navigation_heading_rad = m.pending_navigation_heading_rad;
+    }
   }
   const cv::Rect region = m.canvas.dataBounds();
   if (region.empty()) return std::nullopt;
@@ -609,7 +623,8 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   out.ground_origin_en_m = m.ref_en_m;
   for (const auto& c : m.composed)
     out.images.push_back(
-        {c.index, c.stamp_s, c.image, normalizeHomography(ground_from_local * c.local_from_px), c.navigation_m});
+        {c.index, c.stamp_s, c.image, normalizeHomography(ground_from_local * c.local_from_px), c.navigation_m,
+         c.navigation_heading_rad});
   for (const auto& f : m.footprints_local) {
     std::array<Eigen::Vector2d, 4> u;
     for (int i = 0; i < 4; ++i) u[i] = m.ref_en_m + (out.resampled ? fit.apply(f[i]) : Eigen::Vector2d(f[i] + shift));

@@ -786,6 +786,7 @@ std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pe
     kept.closed_correction_m =
         i < pending.image_corrections_m.size() ? pending.image_corrections_m[i] : Eigen::Vector2d::Zero();
     kept.closed_navigation_m = image.navigation_m;
+    if (image.navigation_m) kept.closed_navigation_heading_rad = image.navigation_heading_rad;
     const std::string error =
         tiles::writeRecordedImage(images_dir_, kept.file, image.image, config_.kept_image_quality);
     if (!error.empty()) {

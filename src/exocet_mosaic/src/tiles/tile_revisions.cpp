@@ -88,6 +88,7 @@ nlohmann::json tileRecordToJson(const TileRecord& r) {
                             {"ground_from_px", matrixJson(i.ground_from_px)}};
     if (i.closed_navigation_m)
       image["closed_navigation_m"] = {i.closed_navigation_m->x(), i.closed_navigation_m->y()};
+    if (i.closed_navigation_heading_rad) image["closed_navigation_heading_rad"] = *i.closed_navigation_heading_rad;
     if (i.gain != std::array<double, 3>{1.0, 1.0, 1.0}) image["gain"] = i.gain;
     images.push_back(image);
   }
@@ -151,6 +152,12 @@ TileRecord tileRecordFromJson(const nlohmann::json& j) {
     image.closed_ground_from_px = matrixField(i, "closed_ground_from_px");
     image.closed_correction_m = pointField(i, "closed_correction_m");
     if (i.contains("closed_navigation_m")) image.closed_navigation_m = pointField(i, "closed_navigation_m");
+    if (i.contains("closed_navigation_heading_rad")) {
+      const double heading = field<double>(i, "closed_navigation_heading_rad");
+      if (!std::isfinite(heading))
+        throw std::invalid_argument("tile record: an image's closed_navigation_heading_rad must be finite");
+      image.closed_navigation_heading_rad = heading;
+    }
     image.ground_from_px = matrixField(i, "ground_from_px");
     if (i.contains("gain")) {
       image.gain = field<std::array<double, 3>>(i, "gain");
@@ -192,6 +199,9 @@ std::string RevisionConfig::validate() const {
   if (residual_window_images < 0 || residual_window_images > 101 ||
       (residual_window_images > 0 && residual_window_images % 2 == 0))
     bad("residual_window_images must be 0 or odd in [1, 101] (got " + std::to_string(residual_window_images) + ")");
+  if (heading_window_images < 0 || heading_window_images > 101 ||
+      (heading_window_images > 0 && heading_window_images % 2 == 0))
+    bad("heading_window_images must be 0 or odd in [1, 101] (got " + std::to_string(heading_window_images) + ")");
   return e;
 }
 
@@ -225,6 +235,72 @@ Eigen::Vector4d fitSimilarity(const std::vector<Eigen::Vector2d>& q, const std::
 Eigen::Vector2d applySimilarity(const Eigen::Vector4d& p, const Eigen::Vector2d& c, const Eigen::Vector2d& q) {
   const Eigen::Vector2d d = q - c;
   return q + Eigen::Vector2d(p(0) * d.x() - p(1) * d.y(), p(1) * d.x() + p(0) * d.y()) + p.tail<2>();
+}
+
+double wrapAngle(double a) { return std::remainder(a, 2.0 * M_PI); }
+
+/// How far each image's content must turn (rad, counter-clockwise) to follow its pose's heading, relative to the
+/// tile's median disagreement between the chain's placement at close and the poses' headings, averaged over `window`
+/// neighbouring images; an image without a heading takes its nearest neighbour's. Empty when window is 0 or no image
+/// has a heading (the content then turns with the similarity).
+std::vector<double> contentTurnsRad(const TileRecord& record, int window) {
+  // A disagreement this far from the tile's median is a pose the filter got wrong (or a turn the stamps lag), not
+  // the chain's drift: left out.
+  constexpr double kMaxDriftRad = 0.1;
+  const std::size_t n = record.images.size();
+  if (window <= 0 || n == 0) return {};
+  std::vector<std::optional<double>> drift(n);
+  std::vector<double> values;
+  for (std::size_t i = 0; i < n; ++i) {
+    const RecordedImage& image = record.images[i];
+    if (!image.closed_navigation_heading_rad) continue;
+    const double d = compose::imageXDirectionRad(image.closed_ground_from_px, centreOf(image)) -
+                     *image.closed_navigation_heading_rad;
+    if (!std::isfinite(d)) continue;
+    drift[i] = wrapAngle(d);
+    values.push_back(*drift[i]);
+  }
+  if (values.empty()) return {};
+  // The median on the circle: of the differences from one of them.
+  std::vector<double> relative;
+  for (double v : values) relative.push_back(wrapAngle(v - values.front()));
+  std::nth_element(relative.begin(), relative.begin() + relative.size() / 2, relative.end());
+  const double median = values.front() + relative[relative.size() / 2];
+  std::vector<std::optional<double>> off(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (drift[i] && std::abs(wrapAngle(*drift[i] - median)) <= kMaxDriftRad) off[i] = wrapAngle(*drift[i] - median);
+  const int half = window / 2;
+  std::vector<std::optional<double>> smoothed(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    double sum = 0;
+    int count = 0;
+    for (int k = -half; k <= half; ++k) {
+      const long j = static_cast<long>(i) + k;
+      if (j < 0 || j >= static_cast<long>(n) || !off[j]) continue;
+      sum += *off[j];
+      ++count;
+    }
+    if (count > 0) smoothed[i] = sum / count;
+  }
+  std::vector<double> turn(n, 0.0);
+  bool any = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    // Nearest image with a value (the image itself first).
+    for (std::size_t step = 0; step < n; ++step) {
+      if (i >= step && smoothed[i - step]) {
+        turn[i] = -*smoothed[i - step];
+        any = true;
+        break;
+      }
+      if (i + step < n && smoothed[i + step]) {
+        turn[i] = -*smoothed[i + step];
+        any = true;
+        break;
+      }
+    }
+  }
+  if (!any) return {};
+  return turn;
 }
 
 }  // namespace
@@ -289,8 +365,18 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
   std::vector<Eigen::Vector2d> residual(n, Eigen::Vector2d::Zero());
   for (std::size_t i = 0; i < n; ++i)
     if (kept[i]) residual[i] = target[i] - applySimilarity(p, c, q[i]);
+  const std::vector<double> turn_rad = contentTurnsRad(record, config.heading_window_images);
+  const double similarity_rotation_rad = std::atan2(p(1), 1.0 + p(0));
   const int half = config.residual_window_images / 2;
   for (std::size_t i = 0; i < n; ++i) {
+    cv::Matx33d placed = similarity * record.images[i].closed_ground_from_px;
+    if (!turn_rad.empty()) {
+      // The content turned about the image's centre: back from the similarity's rotation, and by the heading.
+      const Eigen::Vector2d g = compose::applyHomography(placed, centreOf(record.images[i]));
+      const double a = turn_rad[i] - similarity_rotation_rad, c = std::cos(a), sn = std::sin(a);
+      const cv::Matx33d turn(c, -sn, g.x() - c * g.x() + sn * g.y(), sn, c, g.y() - sn * g.x() - c * g.y(), 0, 0, 1);
+      placed = turn * placed;
+    }
     Eigen::Vector2d bend = Eigen::Vector2d::Zero();
     if (config.residual_window_images > 0) {
       int count = 0;
@@ -302,8 +388,7 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
       }
       if (count > 0) bend /= count;
     }
-    out[i] = compose::normalizeHomography(record.adjustment * translation(bend) * similarity *
-                                          record.images[i].closed_ground_from_px);
+    out[i] = compose::normalizeHomography(record.adjustment * translation(bend) * placed);
   }
   return out;
 }
@@ -316,7 +401,7 @@ double largestCornerMoveM(const TileRecord& record, const std::vector<cv::Matx33
   for (std::size_t i = 0; i < placements.size(); ++i) {
     const RecordedImage& image = record.images[i];
     const double w = image.width_px - 0.5, h = image.height_px - 0.5;
-    for (const Eigen::Vector2d corner : {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(w, -0.5), Eigen::Vector2d(w, h),
+    for (const Eigen::Vector2d& corner : {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(w, -0.5), Eigen::Vector2d(w, h),
                                          Eigen::Vector2d(-0.5, h)})
       moved = std::max(moved, (compose::applyHomography(placements[i], corner) -
                                compose::applyHomography(image.ground_from_px, corner))

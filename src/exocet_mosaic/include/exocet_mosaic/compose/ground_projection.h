@@ -41,6 +41,10 @@ bool pixelFromGround(const CameraGroundPose& pose, const cv::Size& image_size, c
 /// Applies a homography to a 2-D point (divides by the third coordinate).
 Eigen::Vector2d applyHomography(const cv::Matx33d& h, const Eigen::Vector2d& p);
 
+/// Direction (rad, counter-clockwise from east) in which the image's +x axis lies on the ground at pixel at_px: how a
+/// placement orients the image's content there.
+double imageXDirectionRad(const cv::Matx33d& ground_from_px, const Eigen::Vector2d& at_px);
+
 /// Scales a homography so that its (2,2) element is 1 (when it is not ~0): keeps products of chains conditioned.
 cv::Matx33d normalizeHomography(const cv::Matx33d& h);
 

@@ -72,6 +72,10 @@ struct ComposedImage {
   /// Where the image's own fused pose puts its centre (same ground frame); empty when it had no pose or its pose was
   /// left out of the tile's fit (an outlier).
   std::optional<Eigen::Vector2d> navigation_m;
+  /// With navigation_m: the direction (rad, counter-clockwise from east) in which the image's own pose lays its +x
+  /// axis on the ground at its centre. The chain's placement drifts in rotation over a tile; the heading sensor's
+  /// does not as much (tiles::placementsAt).
+  std::optional<double> navigation_heading_rad;
 };
 
 /// A closed, geo-referenced mosaic.

@@ -60,6 +60,9 @@ struct RecordedImage {
   Eigen::Vector2d closed_correction_m = Eigen::Vector2d::Zero();  ///< the graph's correction in the pose then
   /// Where the image's fused pose put its centre then (same ground frame, the correction included); none: no pose.
   std::optional<Eigen::Vector2d> closed_navigation_m;
+  /// With closed_navigation_m: the direction (rad, counter-clockwise from east) in which that pose laid the image's +x
+  /// axis on the ground at its centre (compose::ComposedImage::navigation_heading_rad).
+  std::optional<double> closed_navigation_heading_rad;
   cv::Matx33d ground_from_px = cv::Matx33d::eye();  ///< as the tile's current version drew it
   /// Gain per channel (BGR; grey: [0]) the image is drawn with after the lighting correction: its share of the
   /// dive's gain compensation (compose::ImageGains); 1 until one is solved.
@@ -113,6 +116,14 @@ struct RevisionConfig {
   /// Each image's residual after the tile's similarity is averaged over this many neighbouring images (odd, [1,
   /// 101]) and applied to it: the tile bends with the graph without taking each pose's noise; 0: the similarity only.
   int residual_window_images = 5;
+  /// The images' orientation follows the heading sensor: each image turns about its centre by how far the chain's
+  /// placement at close had turned away from its pose's heading (relative to the tile's median of that difference,
+  /// averaged over this many neighbouring images, odd, [1, 101]), and the similarity above moves the images' centres
+  /// without turning their content. The registration chain's rotation drifts over a tile (about 18 mrad over the 120
+  /// images of the sample out-and-back dive's first tile, where the gyro drifted 4); the graph's positions say how the
+  /// track turned, not how each image's content is turned. 0: the content turns with the similarity (the chain's
+  /// orientation kept). Images without a recorded heading follow their neighbours' correction.
+  int heading_window_images = 9;
   std::string validate() const;
 };
 
