@@ -108,6 +108,8 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readDouble("rerender_threshold_gsd", &c.rerender_threshold_gsd, 0.05, 1000.0,
                "image move (ground sample distances) that makes a written tile drawn again");
   p.readDouble("rerender_period_s", &c.rerender_period_s, 0.05, 600.0, "wall seconds between looks at the tiles");
+  p.readBool("revision_follows_heading", &c.revision.content_follows_heading,
+             "a tile drawn again turns its images to their poses' headings (false: the chain's orientation)");
   p.readDouble("tile_adjustment_period_s", &c.tile_adjustment_period_s, 0.0, 3600.0,
                "wall seconds between registrations of the written tiles with each other, 0: none");
   if (c.tile_adjustment_period_s > 0.0 && c.tile_adjustment_period_s < 1.0)

@@ -980,7 +980,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
       // images were added).
       const auto failed = revision_failed_at_.find(index);
       if (failed != revision_failed_at_.end() && failed->second == received && !relit) continue;
-      const double moved_m = track.empty() ? 0.0 : tiles::tileDisplacementM(record, track);
+      const double moved_m = track.empty() ? 0.0 : tiles::tileDisplacementM(record, track, config_.revision);
       max_tile_move_m_ = std::max(max_tile_move_m_, moved_m);
       const bool moved = moved_m > config_.rerender_threshold_gsd * record.gsd_m;
       if (every_tile || relit || moved) {
@@ -1020,7 +1020,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     for (const tiles::RecordedImage& image : record.images) current.push_back(image.ground_from_px);
     tiles::RevisedTile revision =
         keep_placements[k] ? tiles::renderTileWith(record, current, images_dir_, render, prepare)
-                           : tiles::renderTileAt(record, track, images_dir_, render, tiles::RevisionConfig(), prepare);
+                           : tiles::renderTileAt(record, track, images_dir_, render, config_.revision, prepare);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     std::lock_guard<std::mutex> lock(write_mutex_);
     last_rerender_ms_ = ms;

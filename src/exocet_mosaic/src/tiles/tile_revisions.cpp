@@ -199,9 +199,6 @@ std::string RevisionConfig::validate() const {
   if (residual_window_images < 0 || residual_window_images > 101 ||
       (residual_window_images > 0 && residual_window_images % 2 == 0))
     bad("residual_window_images must be 0 or odd in [1, 101] (got " + std::to_string(residual_window_images) + ")");
-  if (heading_window_images < 0 || heading_window_images > 101 ||
-      (heading_window_images > 0 && heading_window_images % 2 == 0))
-    bad("heading_window_images must be 0 or odd in [1, 101] (got " + std::to_string(heading_window_images) + ")");
   return e;
 }
 
@@ -239,67 +236,60 @@ Eigen::Vector2d applySimilarity(const Eigen::Vector4d& p, const Eigen::Vector2d&
 
 double wrapAngle(double a) { return std::remainder(a, 2.0 * M_PI); }
 
-/// How far each image's content must turn (rad, counter-clockwise) to follow its pose's heading, relative to the
-/// tile's median disagreement between the chain's placement at close and the poses' headings, averaged over `window`
-/// neighbouring images; an image without a heading takes its nearest neighbour's. Empty when window is 0 or no image
-/// has a heading (the content then turns with the similarity).
-std::vector<double> contentTurnsRad(const TileRecord& record, int window) {
+/// How far each image's content must turn (rad, counter-clockwise) to follow its pose's heading: minus the trend (a
+/// straight line in time, least squares, without the images more than kMaxDriftRad or three median deviations off a
+/// first fit) of the disagreement between the chain's placement at close and the poses' headings, taken relative to
+/// its value mid-tile. A line over the whole tile averages the heading's noise over every image and takes the
+/// chain's drift, which grows along the tile. Empty when fewer than 3 images have a heading (nothing to fit).
+std::vector<double> contentTurnsRad(const TileRecord& record) {
   // A disagreement this far from the tile's median is a pose the filter got wrong (or a turn the stamps lag), not
-  // the chain's drift: left out.
+  // the chain's drift.
   constexpr double kMaxDriftRad = 0.1;
   const std::size_t n = record.images.size();
-  if (window <= 0 || n == 0) return {};
-  std::vector<std::optional<double>> drift(n);
-  std::vector<double> values;
-  for (std::size_t i = 0; i < n; ++i) {
-    const RecordedImage& image = record.images[i];
+  std::vector<double> stamps, drifts;
+  for (const RecordedImage& image : record.images) {
     if (!image.closed_navigation_heading_rad) continue;
     const double d = compose::imageXDirectionRad(image.closed_ground_from_px, centreOf(image)) -
                      *image.closed_navigation_heading_rad;
-    if (!std::isfinite(d)) continue;
-    drift[i] = wrapAngle(d);
-    values.push_back(*drift[i]);
+    if (!std::isfinite(d) || !std::isfinite(image.stamp_s)) continue;
+    stamps.push_back(image.stamp_s);
+    drifts.push_back(wrapAngle(d));
   }
-  if (values.empty()) return {};
-  // The median on the circle: of the differences from one of them.
-  std::vector<double> relative;
-  for (double v : values) relative.push_back(wrapAngle(v - values.front()));
-  std::nth_element(relative.begin(), relative.begin() + relative.size() / 2, relative.end());
-  const double median = values.front() + relative[relative.size() / 2];
-  std::vector<std::optional<double>> off(n);
-  for (std::size_t i = 0; i < n; ++i)
-    if (drift[i] && std::abs(wrapAngle(*drift[i] - median)) <= kMaxDriftRad) off[i] = wrapAngle(*drift[i] - median);
-  const int half = window / 2;
-  std::vector<std::optional<double>> smoothed(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    double sum = 0;
-    int count = 0;
-    for (int k = -half; k <= half; ++k) {
-      const long j = static_cast<long>(i) + k;
-      if (j < 0 || j >= static_cast<long>(n) || !off[j]) continue;
-      sum += *off[j];
-      ++count;
+  if (drifts.size() < 3) return {};
+  // On the circle: relative to the median.
+  std::vector<double> sorted;
+  for (double d : drifts) sorted.push_back(wrapAngle(d - drifts.front()));
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double median = drifts.front() + sorted[sorted.size() / 2];
+  for (double& d : drifts) d = wrapAngle(d - median);
+  const double t0 = 0.5 * (stamps.front() + stamps.back());
+  std::vector<bool> use(drifts.size());
+  for (std::size_t i = 0; i < drifts.size(); ++i) use[i] = std::abs(drifts[i]) <= kMaxDriftRad;
+  Eigen::Vector2d line = Eigen::Vector2d::Zero();  // drift = line(0) + line(1) (t - t0)
+  for (int pass = 0; pass < 2; ++pass) {
+    Eigen::Matrix2d a = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d b = Eigen::Vector2d::Zero();
+    int used = 0;
+    for (std::size_t i = 0; i < drifts.size(); ++i) {
+      if (!use[i]) continue;
+      const Eigen::Vector2d j(1.0, stamps[i] - t0);
+      a += j * j.transpose();
+      b += j * drifts[i];
+      ++used;
     }
-    if (count > 0) smoothed[i] = sum / count;
+    if (used < 3 || std::abs(a.determinant()) < 1e-12) return {};
+    line = a.ldlt().solve(b);
+    if (pass == 1) break;
+    std::vector<double> deviations;
+    for (std::size_t i = 0; i < drifts.size(); ++i)
+      if (use[i]) deviations.push_back(std::abs(drifts[i] - line(0) - line(1) * (stamps[i] - t0)));
+    std::nth_element(deviations.begin(), deviations.begin() + deviations.size() / 2, deviations.end());
+    const double limit = std::max(3.0 * deviations[deviations.size() / 2], 1e-4);
+    for (std::size_t i = 0; i < drifts.size(); ++i)
+      if (use[i]) use[i] = std::abs(drifts[i] - line(0) - line(1) * (stamps[i] - t0)) <= limit;
   }
-  std::vector<double> turn(n, 0.0);
-  bool any = false;
-  for (std::size_t i = 0; i < n; ++i) {
-    // Nearest image with a value (the image itself first).
-    for (std::size_t step = 0; step < n; ++step) {
-      if (i >= step && smoothed[i - step]) {
-        turn[i] = -*smoothed[i - step];
-        any = true;
-        break;
-      }
-      if (i + step < n && smoothed[i + step]) {
-        turn[i] = -*smoothed[i + step];
-        any = true;
-        break;
-      }
-    }
-  }
-  if (!any) return {};
+  std::vector<double> turn(n);
+  for (std::size_t i = 0; i < n; ++i) turn[i] = -line(1) * (record.images[i].stamp_s - t0);
   return turn;
 }
 
@@ -365,7 +355,8 @@ std::vector<cv::Matx33d> placementsAt(const TileRecord& record, const PositionCo
   std::vector<Eigen::Vector2d> residual(n, Eigen::Vector2d::Zero());
   for (std::size_t i = 0; i < n; ++i)
     if (kept[i]) residual[i] = target[i] - applySimilarity(p, c, q[i]);
-  const std::vector<double> turn_rad = contentTurnsRad(record, config.heading_window_images);
+  const std::vector<double> turn_rad =
+      config.content_follows_heading ? contentTurnsRad(record) : std::vector<double>();
   const double similarity_rotation_rad = std::atan2(p(1), 1.0 + p(0));
   const int half = config.residual_window_images / 2;
   for (std::size_t i = 0; i < n; ++i) {

@@ -123,10 +123,9 @@ int main(int argc, char** argv) {
   app.add_option("--residual-window", revision.residual_window_images,
                  "images over which each image's residual to the graph is averaged (odd), 0: one similarity per tile")
       ->capture_default_str();
-  app.add_option("--heading-window", revision.heading_window_images,
-                 "images over which each image's turn towards its pose's heading is averaged (odd), 0: the images "
-                 "keep the chain's orientation")
-      ->capture_default_str();
+  app.add_flag("!--chain-orientation", revision.content_follows_heading,
+               "the images keep the chain's orientation (turned with their tile's similarity) instead of turning to "
+               "their poses' headings");
   app.add_flag("!--no-gain-compensation", gain_compensation, "keep the images' levels as drawn");
   ec::ImageGainsConfig image_gain_config;
   app.add_option("--image-gain-min-cells", image_gain_config.min_common_cells,

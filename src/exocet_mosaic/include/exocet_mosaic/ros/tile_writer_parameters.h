@@ -11,6 +11,7 @@
 
 #include "exocet_mosaic/compose/composer_config.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/tile_revisions.h"
 
 namespace exocet_mosaic {
 
@@ -65,6 +66,9 @@ struct TileWriterNodeConfig {
   std::string graph_corrections_topic;
   double rerender_threshold_gsd = 0.5;  ///< in ground sample distances, [0.05, 1000]
   double rerender_period_s = 1.0;       ///< wall seconds between two looks at the written tiles, [0.05, 600]
+  /// How a tile drawn again places its images (tiles::placementsAt); ~revision_follows_heading sets
+  /// content_follows_heading.
+  tiles::RevisionConfig revision;
   /// With graph_corrections_topic: at most this often (wall s, [1, 3600]) and when tiles changed, the written tiles
   /// are registered with their overlapping neighbours (tiles::measureAndSolve, as adjust_tiles) and each moved by one
   /// similarity on top of the graph's placement; 0 turns it off.

@@ -116,14 +116,14 @@ struct RevisionConfig {
   /// Each image's residual after the tile's similarity is averaged over this many neighbouring images (odd, [1,
   /// 101]) and applied to it: the tile bends with the graph without taking each pose's noise; 0: the similarity only.
   int residual_window_images = 5;
-  /// The images' orientation follows the heading sensor: each image turns about its centre by how far the chain's
-  /// placement at close had turned away from its pose's heading (relative to the tile's median of that difference,
-  /// averaged over this many neighbouring images, odd, [1, 101]), and the similarity above moves the images' centres
-  /// without turning their content. The registration chain's rotation drifts over a tile (about 18 mrad over the 120
-  /// images of the sample out-and-back dive's first tile, where the gyro drifted 4); the graph's positions say how the
-  /// track turned, not how each image's content is turned. 0: the content turns with the similarity (the chain's
-  /// orientation kept). Images without a recorded heading follow their neighbours' correction.
-  int heading_window_images = 9;
+  /// The images' orientation follows the heading sensor: each image turns about its centre by the trend along the
+  /// tile (a line in time, robust least squares) of the disagreement between the chain's placement at close and its
+  /// pose's heading, taken relative to mid-tile, and the similarity above moves the images' centres without turning
+  /// their content. The registration chain's rotation drifts over a tile (about 18 mrad over the 120 images of the
+  /// sample out-and-back dive's first tile, where the gyro drifted 4); the graph's positions say how the track turned,
+  /// not how each image's content is turned. false: the content turns with the similarity (the chain's orientation
+  /// kept). A tile with fewer than 3 headings keeps the chain's orientation.
+  bool content_follows_heading = true;
   std::string validate() const;
 };
 
