@@ -484,6 +484,8 @@ BENCHMARKS = {
             ('*_live_overlap_max_px', 'live tiles: every overlapping pair misaligned, max (px)'),
             ('*_live_landmark_p95_m', 'live tiles: landmark error, p95 (m)'),
             ('*rate_no_drop', 'replay rate reached with no frame dropped (x real time; n/a: every attempt dropped)'),
+            ('*cpu_ms_per_frame', 'CPU per frame of the bag, per node, start-up included (ms)'),
+            ('*peak_rss_mb_max', 'peak resident memory of the largest node (MB)'),
             ('*overlap_level_step_max_grey', 'overlapping tiles: mean luma step, max over pairs (grey levels)'),
             ('*overlap_abs_diff_median_grey', 'overlapping tiles: |luma difference| median, pooled (grey levels)'),
             ('overlap_colour_pairs', 'overlapping pairs compared in colour'),

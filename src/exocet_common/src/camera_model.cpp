@@ -27,6 +27,7 @@ CameraModel centred(int width, int height, double hfov_deg) {
 
 CameraModel CameraModel::pal(double hfov_deg) { return centred(720, 576, hfov_deg); }
 CameraModel CameraModel::hd(double hfov_deg) { return centred(1920, 1080, hfov_deg); }
+CameraModel CameraModel::uhd(double hfov_deg) { return centred(3840, 2160, hfov_deg); }
 
 bool CameraModel::hasDistortion() const {
   for (double d : distortion)

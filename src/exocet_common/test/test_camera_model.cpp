@@ -62,6 +62,11 @@ TEST(CameraModel, UndistortionInvertsDistortionOverTheImage) {
 
 TEST(CameraModel, ValidateNamesEveryBadField) {
   EXPECT_EQ(CameraModel::hd().validate(), "");
+  const CameraModel uhd = CameraModel::uhd(60.0);
+  EXPECT_EQ(uhd.validate(), "");
+  EXPECT_EQ(uhd.width, 3840);
+  EXPECT_EQ(uhd.height, 2160);
+  EXPECT_NEAR(uhd.fx, 0.5 * 3840 / std::tan(30.0 * M_PI / 180.0), 1e-9);
   CameraModel c = CameraModel::pal();
   c.width = 8;
   c.fx = -1.0;

@@ -26,6 +26,8 @@ struct CameraModel {
   static CameraModel pal(double hfov_deg = 60.0);
   /// 1920x1080 HD camera with the given horizontal field of view (degrees).
   static CameraModel hd(double hfov_deg = 60.0);
+  /// 3840x2160 4K UHD camera with the given horizontal field of view (degrees).
+  static CameraModel uhd(double hfov_deg = 60.0);
 
   cv::Matx33d K() const { return cv::Matx33d(fx, 0, cx, 0, fy, cy, 0, 0, 1); }
   cv::Mat distortionCoeffs() const { return cv::Mat(1, 5, CV_64F, const_cast<double*>(distortion.data())).clone(); }

@@ -184,11 +184,13 @@ DiveDescription parseDiveDescription(const std::string& yaml_text, const std::ve
   camera.get("hfov_deg", &d.camera_hfov_deg);
   camera.get("intrinsics_yaml", &d.intrinsics_yaml);
   d.intrinsics_yaml = resolvePath(d.intrinsics_yaml, base_dir);
-  if (d.camera_preset != "pal" && d.camera_preset != "hd")
-    throw std::invalid_argument("camera.preset '" + d.camera_preset + "' is not one of pal, hd");
+  if (d.camera_preset != "pal" && d.camera_preset != "hd" && d.camera_preset != "uhd")
+    throw std::invalid_argument("camera.preset '" + d.camera_preset + "' is not one of pal, hd, uhd");
   if (!(d.camera_hfov_deg >= 10.0 && d.camera_hfov_deg <= 150.0))
     throw std::invalid_argument("camera.hfov_deg = " + std::to_string(d.camera_hfov_deg) + " out of range [10, 150] deg");
-  rig.camera = d.camera_preset == "hd" ? exocet_common::CameraModel::hd(d.camera_hfov_deg) : exocet_common::CameraModel::pal(d.camera_hfov_deg);
+  rig.camera = d.camera_preset == "uhd"  ? exocet_common::CameraModel::uhd(d.camera_hfov_deg)
+               : d.camera_preset == "hd" ? exocet_common::CameraModel::hd(d.camera_hfov_deg)
+                                         : exocet_common::CameraModel::pal(d.camera_hfov_deg);
   if (!d.intrinsics_yaml.empty()) {
     try {
       rig.camera = exocet_common::loadCameraModelYaml(d.intrinsics_yaml);

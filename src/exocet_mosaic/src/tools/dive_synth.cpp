@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
   };
   shortcut("--seed", "N", key("seed"), "seed of every random draw: same arguments and seed give a byte-identical bag");
   shortcut("--duration", "S", key("duration_s"), "stop after S seconds (0: the whole trajectory)");
-  shortcut("--preset", "pal|hd", key("camera.preset"), "720x576 or 1920x1080 camera");
+  shortcut("--preset", "pal|hd|uhd", key("camera.preset"), "720x576, 1920x1080 or 3840x2160 camera");
   shortcut("--trajectory", "KIND", key("trajectory.kind"), "lawnmower | out_and_back | waypoints");
   shortcut(
       "--waypoints", "FILE.csv",
