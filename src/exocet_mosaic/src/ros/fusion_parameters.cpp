@@ -105,7 +105,7 @@ std::vector<std::string> removeStaleFusionScratch(const std::string& private_nam
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(folder, ec)) {
     const std::string name = entry.path().filename().string();
-    for (const std::string prefix : {"exocet_loop_images" + node + "_pid", "exocet_fusion_steps" + node + "_pid"}) {
+    for (const std::string& prefix : {"exocet_loop_images" + node + "_pid", "exocet_fusion_steps" + node + "_pid"}) {
       if (name.compare(0, prefix.size(), prefix) != 0) continue;
       char* end = nullptr;
       const long pid = std::strtol(name.c_str() + prefix.size(), &end, 10);
@@ -220,6 +220,8 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
   params.readOptionalString(
       "loop_image_folder", &c.loop_image_folder,
       "folder of the loop closer's key-frame images beyond the few in memory; empty: all in memory");
+  params.readDouble("loop_image_buffer_mb", &c.loop_image_buffer_mb, 1.0, 4096.0,
+                    "recent compressed images kept for the loop closer's key frames (MB)");
   params.readBool("keep_smoother_log", &c.keep_smoother_log,
                   "keep the whole dive for the RTS smoother and the track files");
   params.readOptionalString("smoother_log_file", &c.smoother_log_file,

@@ -104,8 +104,12 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     graph_odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.graph_odometry_topic, 100);
     graph_corrections_pub_ = nh_.advertise<exocet_msgs::PositionCorrections>(config_.graph_corrections_topic, 1, true);
     startGraph();
-    if (config_.loop_closure)
+    if (config_.loop_closure) {
+      graph::RecentImageBufferLimits recent;
+      recent.max_bytes = static_cast<std::size_t>(config_.loop_image_buffer_mb * 1e6);
+      recent_images_ = graph::RecentImageBuffer<sensor_msgs::CompressedImageConstPtr>(recent);
       loop_image_sub_ = nh_.subscribe(config_.loop_image_topic, 50, &FusionRos::onLoopImage, this);
+    }
   }
   if (!config_.camera_height_topic.empty())
     camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
@@ -966,23 +970,19 @@ std::optional<Eigen::Vector2d> FusionRos::graphCorrectionAt(double stamp_s) cons
 
 void FusionRos::onLoopImage(const sensor_msgs::CompressedImageConstPtr& msg) {
   // Only the images of the last seconds: the feeder makes a key frame when the image's motion arrives.
-  const double t = msg->header.stamp.toSec();
-  recent_images_[t] = msg;
-  // Long enough for the registration's lag on a fast replay, short enough that HD images (~0.4 MB) stay few.
-  while (!recent_images_.empty() && (recent_images_.begin()->first < t - 10.0 || recent_images_.size() > 250))
-    recent_images_.erase(recent_images_.begin());
+  recent_images_.add(msg->header.stamp.toSec(), msg, msg->data.size());
 }
 
 void FusionRos::offerKeyFrame(int64_t id, double stamp_s, const std::optional<Eigen::Quaterniond>& attitude,
                               double yaw_rad) {
-  const auto it = recent_images_.lower_bound(stamp_s - 1e-4);
+  const std::optional<sensor_msgs::CompressedImageConstPtr> image = recent_images_.find(stamp_s);
   const auto camera = front_end_->cameraMount();
-  if (it == recent_images_.end() || std::abs(it->first - stamp_s) > 1e-4 || !camera || !last_camera_matrix_) {
+  if (!image || !camera || !last_camera_matrix_) {
     ++loop_images_missing_;
     return;
   }
   DecodedImage decoded;
-  const std::string error = decodeCompressedImage(*it->second, &decoded, DecodeMode::kGreyIfJpeg);
+  const std::string error = decodeCompressedImage(**image, &decoded, DecodeMode::kGreyIfJpeg);
   if (!error.empty() || decoded.image.empty()) {
     ++loop_images_missing_;
     return;

@@ -92,6 +92,10 @@ struct FusionNodeConfig {
   /// emptied of an earlier run's at start); empty: all in memory, which grows with the dive. Default
   /// defaultLoopImageFolder() for the node.
   std::string loop_image_folder;
+  /// With loop_closure: the compressed images of the last seconds kept for the key frames to come (the feeder makes a
+  /// key frame when the image's motion arrives), at most 10 s, 250 images and this many MB, [1, 4096]: a 4K camera's
+  /// JPEGs (about 1.3 MB each) would otherwise hold 330 MB.
+  double loop_image_buffer_mb = 64.0;
   /// sensor_msgs/Range at each published state: the camera's height above the seabed (for the tile writer).
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs

@@ -42,6 +42,7 @@
 #include "exocet_mosaic/graph/background_pose_graph.h"
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/graph/loop_closer.h"
+#include "exocet_mosaic/graph/recent_image_buffer.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 #include "exocet_mosaic/ros/keyed_throttle.h"
 
@@ -165,7 +166,7 @@ class FusionRos {
   // ~loop_closure: the recent images by stamp, for the key frames the feeder makes.
   std::unique_ptr<graph::LoopCloser> loop_closer_;
   ros::Subscriber loop_image_sub_;
-  std::map<double, sensor_msgs::CompressedImageConstPtr> recent_images_;
+  graph::RecentImageBuffer<sensor_msgs::CompressedImageConstPtr> recent_images_{graph::RecentImageBufferLimits()};
   uint64_t loop_images_missing_ = 0;
   int64_t graph_navigation_ties_ = 0;  ///< key frames tied by the fused displacement (no image odometry)
   std::optional<Eigen::Matrix3d> last_camera_matrix_;  ///< K of the images (the motions' or camera_info's)
