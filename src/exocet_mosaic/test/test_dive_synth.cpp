@@ -349,7 +349,17 @@ TEST(DiveDescription, RejectsBadValuesNamingTheField) {
   EXPECT_NE(error_of({"trajectory.kind=waypoints", "trajectory.waypoints_csv=/nonexistent/wp.csv"}).find("/nonexistent/wp.csv"),
             std::string::npos);
   EXPECT_NE(error_of({"camera.intrinsics_yaml=/nonexistent/k.yaml"}).find("/nonexistent/k.yaml"), std::string::npos);
+  EXPECT_NE(error_of({"camera.preset=8k"}).find("pal, hd, uhd"), std::string::npos);
   EXPECT_EQ(error_of({}), "");
+}
+
+TEST(DiveDescription, CameraPresetsGiveTheirSizes) {
+  const DiveDescription uhd = parseDiveDescription("", {"camera.preset=uhd", "camera.hfov_deg=60"}, ".");
+  EXPECT_EQ(uhd.synthesis.rig.camera.width, 3840);
+  EXPECT_EQ(uhd.synthesis.rig.camera.height, 2160);
+  const DiveDescription hd = parseDiveDescription("", {"camera.preset=hd"}, ".");
+  EXPECT_EQ(hd.synthesis.rig.camera.width, 1920);
+  EXPECT_EQ(parseDiveDescription("", {}, ".").synthesis.rig.camera.width, 720);
 }
 
 TEST(DiveSynthTool, BadInputsExitWithAClearErrorAndLeaveNoOutput) {

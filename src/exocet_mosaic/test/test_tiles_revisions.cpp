@@ -321,6 +321,14 @@ TEST(TileRevisions, TheRecordReadsBackAndABadOneIsNamed) {
     EXPECT_NE(std::string(e.what()).find("gain"), std::string::npos) << e.what();
   }
   bad = et::tileRecordToJson(record);
+  bad["images"][2]["closed_navigation_heading_rad"] = "north";
+  try {
+    et::tileRecordFromJson(bad);
+    FAIL() << "a heading that is not a number was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("closed_navigation_heading_rad"), std::string::npos) << e.what();
+  }
+  bad = et::tileRecordToJson(record);
   bad.erase("gsd_m");
   try {
     et::tileRecordFromJson(bad);

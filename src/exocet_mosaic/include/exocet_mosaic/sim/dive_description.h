@@ -42,7 +42,7 @@ struct DiveDescription {
   double origin_longitude_deg = 5.85;
   std::string waypoints_csv;           ///< trajectory.kind = waypoints
   std::string intrinsics_yaml;         ///< camera intrinsics file, overrides preset/hfov/fx.. when given
-  std::string camera_preset = "pal";   ///< pal | hd
+  std::string camera_preset = "pal";   ///< pal | hd | uhd
   double camera_hfov_deg = 60.0;
   int landmark_count = 0;              ///< landmarks placed along the trajectory
   double landmark_size_m = 0.3;
