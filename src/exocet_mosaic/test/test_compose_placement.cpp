@@ -191,7 +191,7 @@ ec::ComposerFrame deferredFrame(const ec::ComposerFrame& frame, int* loads) {
   deferred.image = cv::Mat();
   deferred.image_size = frame.image.size();
   deferred.image_channels = frame.image.channels();
-  deferred.load_image = [image = frame.image, loads]() {
+  deferred.load_image = [image = frame.image, loads](int) {
     ++*loads;
     return image.clone();
   };
@@ -268,11 +268,11 @@ TEST(ComposePlacement, AnImageThatCannotBeLoadedIsSkippedAndSaid) {
     frame.image_size = image.size();
     frame.image_channels = image.channels();
     if (i == 10) {
-      frame.load_image = []() -> cv::Mat { throw std::invalid_argument("corrupt JPEG"); };
+      frame.load_image = [](int) -> cv::Mat { throw std::invalid_argument("corrupt JPEG"); };
     } else if (i == 20) {
-      frame.load_image = [image]() { return image(cv::Rect(0, 0, 100, 100)).clone(); };  // not the announced size
+      frame.load_image = [image](int) { return image(cv::Rect(0, 0, 100, 100)).clone(); };  // not the announced size
     } else {
-      frame.load_image = [image]() { return image; };
+      frame.load_image = [image](int) { return image; };
     }
     composer.add(frame);
     if (i == 10) {

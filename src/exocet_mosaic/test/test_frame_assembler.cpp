@@ -6,8 +6,8 @@
 namespace exocet_mosaic {
 namespace {
 
-std::function<cv::Mat()> image() {
-  return []() { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(7)); };
+ImageDecoder image() {
+  return [](int) { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(7)); };
 }
 
 MotionPart motion(std::int64_t previous) {
@@ -34,7 +34,7 @@ TEST(FrameAssembler, ReleasesCompleteFramesInStampOrderWhateverTheArrivalOrder) 
   EXPECT_FALSE(out[0].pose.has_value());
   EXPECT_EQ(out[1].stamp_ns, 2);
   EXPECT_TRUE(out[1].complete());
-  EXPECT_EQ(out[1].decode_image().at<uchar>(0, 0), 7);
+  EXPECT_EQ(out[1].decode_image(1).at<uchar>(0, 0), 7);
   // A part for a released stamp is late: refused and counted.
   EXPECT_FALSE(assembler.addPose(1, PosePart(), 0.2));
   EXPECT_EQ(assembler.lateParts(), 1);
@@ -44,12 +44,12 @@ TEST(FrameAssembler, ARepeatedImageStampKeepsTheFirstImageAndIsCounted) {
   FrameAssembler assembler(10.0, 100);
   EXPECT_TRUE(assembler.addImage(1, image(), 0.0));
   EXPECT_FALSE(assembler.addImage(
-      1, []() { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)); }, 0.0));
+      1, [](int) { return cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)); }, 0.0));
   EXPECT_EQ(assembler.duplicateImages(), 1);
   EXPECT_EQ(assembler.pendingImages(), 1u);
   const auto out = assembler.popAll();
   ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].decode_image().at<uchar>(0, 0), 7);
+  EXPECT_EQ(out[0].decode_image(1).at<uchar>(0, 0), 7);
   EXPECT_FALSE(assembler.addImage(1, image(), 0.1)) << "released: late";
   EXPECT_EQ(assembler.lateParts(), 1);
 }

@@ -31,6 +31,8 @@ std::string ComposerConfig::validate() const {
   check(multiband_bands >= 1 && multiband_bands <= 10, "multiband_bands", "in [1, 10]", multiband_bands);
   check(min_key_frame_shift_fraction >= 0.0 && min_key_frame_shift_fraction <= 1.0, "min_key_frame_shift_fraction",
         "in [0, 1]", min_key_frame_shift_fraction);
+  if (max_image_reduction != 1 && max_image_reduction != 2 && max_image_reduction != 4 && max_image_reduction != 8)
+    bad.push_back("max_image_reduction must be 1, 2, 4 or 8, got " + std::to_string(max_image_reduction));
   if (anchor != "similarity" && anchor != "translation")
     bad.push_back("anchor must be \"similarity\" or \"translation\", got \"" + anchor + "\"");
   check(anchor_prior_sigma >= 1e-6 && anchor_prior_sigma <= 10.0, "anchor_prior_sigma", "in [1e-6, 10]",

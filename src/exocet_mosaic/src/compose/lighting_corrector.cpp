@@ -62,7 +62,7 @@ LightingCorrector LightingCorrector::clone() const {
 
 void LightingCorrector::reset() {
   mean_.release();
-  image_size_ = cv::Size();
+  working_size_ = cv::Size();
   channels_ = 0;
   frames_used_ = 0;
   frames_rejected_ = 0;
@@ -71,17 +71,26 @@ void LightingCorrector::reset() {
 
 bool LightingCorrector::ready() const { return frames_used_ >= config_.warmup_frames && !mean_.empty(); }
 
+cv::Size LightingCorrector::workingSize(const cv::Size& image_size) const {
+  if (image_size.width <= 0 || image_size.height <= 0) return cv::Size();
+  const int w = std::min(config_.working_width_px, image_size.width);
+  const int h = std::max(1, static_cast<int>(std::lround(static_cast<double>(image_size.height) * w / image_size.width)));
+  return cv::Size(w, h);
+}
+
+bool LightingCorrector::fits(const cv::Size& image_size, int channels) const {
+  return channels == channels_ && !working_size_.empty() && workingSize(image_size) == working_size_;
+}
+
 bool LightingCorrector::observe(const cv::Mat& image) {
   if (image.empty() || image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3)) return false;
-  if (image.size() != image_size_ || image.channels() != channels_) {
+  if (!fits(image.size(), image.channels())) {
     reset();
-    image_size_ = image.size();
+    working_size_ = workingSize(image.size());
     channels_ = image.channels();
   }
-  const int w = std::min(config_.working_width_px, image.cols);
-  const int h = std::max(1, static_cast<int>(std::lround(static_cast<double>(image.rows) * w / image.cols)));
   cv::Mat small, small_f;
-  cv::resize(image, small, cv::Size(w, h), 0, 0, cv::INTER_AREA);  // INTER_AREA: a true average, no aliasing
+  cv::resize(image, small, working_size_, 0, 0, cv::INTER_AREA);  // INTER_AREA: a true average, no aliasing
   small.convertTo(small_f, CV_32F);
   // Dark frames (lamps off, the camera in the water column, a cloud of sediment) would pull the field down.
   const cv::Scalar m = cv::mean(small_f);
@@ -150,17 +159,18 @@ cv::Mat LightingCorrector::smallGain() const {
   return small_gain;
 }
 
-cv::Mat LightingCorrector::gainMap() const {
-  if (gain_version_ == version_ && !gain_.empty()) return gain_;
+cv::Mat LightingCorrector::gainMap(const cv::Size& size) const {
+  if (gain_version_ == version_ && gain_size_ == size && !gain_.empty()) return gain_;
   cv::Mat full;
-  cv::resize(smallGain(), full, image_size_, 0, 0, cv::INTER_LINEAR);
+  cv::resize(smallGain(), full, size, 0, 0, cv::INTER_LINEAR);
   gain_ = full;
+  gain_size_ = size;
   gain_version_ = version_;
   return gain_;
 }
 
 cv::Mat LightingCorrector::gainGrid(const cv::Size& image_size, const cv::Size& grid) const {
-  if (!ready() || image_size != image_size_ || grid.width < 1 || grid.height < 1) return cv::Mat();
+  if (!ready() || !fits(image_size, channels_) || grid.width < 1 || grid.height < 1) return cv::Mat();
   // The full-size gain is the working one upsampled linearly: its block means are the working one's area means.
   cv::Mat out;
   cv::resize(smallGain(), out, grid, 0, 0, cv::INTER_AREA);
@@ -168,8 +178,8 @@ cv::Mat LightingCorrector::gainGrid(const cv::Size& image_size, const cv::Size& 
 }
 
 cv::Mat LightingCorrector::correct(const cv::Mat& image) const {
-  if (!ready() || image.size() != image_size_ || image.channels() != channels_ || image.depth() != CV_8U) return image;
-  const cv::Mat gain = gainMap();
+  if (!ready() || !fits(image.size(), image.channels()) || image.depth() != CV_8U) return image;
+  const cv::Mat gain = gainMap(image.size());
   cv::Mat out(image.size(), image.type());
   const int n = image.cols * channels_;
   for (int y = 0; y < image.rows; ++y) {

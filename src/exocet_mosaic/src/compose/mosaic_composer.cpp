@@ -13,6 +13,7 @@
 #include "canvas_warp.h"
 #include "exocet_mosaic/compose/block_canvas.h"
 #include "exocet_mosaic/compose/feather_weights.h"
+#include "exocet_mosaic/compose/image_reduction.h"
 #include "exocet_mosaic/compose/lighting_corrector.h"
 #include "multiband_blend.h"
 
@@ -76,7 +77,9 @@ struct OpenMosaic {
   cv::Matx33d last_composed_chain = cv::Matx33d::eye();
   bool pending = false;  // the last image is not composed (kept to compose it if the mosaic closes now)
   cv::Mat pending_image;
-  std::function<cv::Mat()> pending_load;  // or how to get it (not decoded unless the mosaic closes on it)
+  bool pending_reduced = false;  // pending_image is at 1/pending_reduction already (else at full resolution)
+  std::function<cv::Mat(int)> pending_load;  // or how to get it (not decoded unless the mosaic closes on it)
+  int pending_reduction = 1;
   cv::Size pending_size;
   int pending_channels = 0;
   cv::Matx33d pending_chain;
@@ -94,7 +97,8 @@ struct OpenMosaic {
     int index;
     double stamp_s;
     cv::Mat image;
-    cv::Matx33d local_from_px;
+    int reduction;
+    cv::Matx33d local_from_px;  // of `image`'s pixels
     std::optional<Eigen::Vector2d> navigation_m;  // where the image's own pose puts its centre (ground - ref)
     std::optional<double> navigation_heading_rad;  // and how it orients the image's x axis there
   };
@@ -123,6 +127,7 @@ struct MosaicComposer::Impl {
   ContinuityTie tie;
   double last_height_m = 0;
   int frames_since_lighting_sample = 0;  // images added since the lighting field last observed one
+  int image_reduction = 0;               // the reduction images are composed at (0: none chosen yet)
 };
 
 MosaicComposer::MosaicComposer(const ComposerConfig& config) : config_(config) {
@@ -149,6 +154,7 @@ void MosaicComposer::setConfig(const ComposerConfig& config) {
 ComposerStats MosaicComposer::stats() const {
   ComposerStats s = impl_->stats;
   s.lighting_ready = impl_->lighting.ready();
+  s.image_reduction = std::max(1, impl_->image_reduction);
   if (impl_->open) {
     s.open_memory_bytes = impl_->open->memoryBytes();
     s.open_extent_m = impl_->open->extentM();
@@ -170,17 +176,18 @@ cv::Mat MosaicComposer::preview(int max_side_px) const {
 
 namespace {
 
-/// Composes one image of the open mosaic (placed by chain) into the canvas.
-void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, int frame_index, double stamp_s,
-                  const ComposerConfig& config, const LightingCorrector& lighting, FeatherWeights& feather,
-                  ComposerStats& stats) {
+/// Composes one image of the open mosaic (placed by chain, in full-resolution px) into the canvas; raw is the image
+/// at 1/reduction.
+void composeImage(OpenMosaic& m, const cv::Mat& raw, int reduction, const cv::Matx33d& chain, int frame_index,
+                  double stamp_s, const ComposerConfig& config, const LightingCorrector& lighting,
+                  FeatherWeights& feather, ComposerStats& stats) {
   cv::Mat image = config.lighting.enabled ? lighting.correct(raw) : raw;
   if (image.channels() != m.channels) {
     cv::Mat converted;
     cv::cvtColor(image, converted, m.channels == 3 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGR2GRAY);
     image = converted;
   }
-  const cv::Matx33d local_from_px = normalizeHomography(m.p_first * chain);
+  const cv::Matx33d local_from_px = normalizeHomography(m.p_first * chain * fullFromReducedPx(reduction));
   const cv::Matx33d canvas_from_px = normalizeHomography(m.canvas_from_local * local_from_px);
   const auto corners = imageCorners(image.size());
   std::array<Eigen::Vector2d, 4> footprint;
@@ -197,7 +204,7 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, i
     cv::Mat kept = raw;  // before the lighting correction (ComposedImage::image)
     if (kept.channels() != m.channels)
       cv::cvtColor(raw, kept, m.channels == 3 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGR2GRAY);
-    m.composed.push_back({frame_index, stamp_s, kept, local_from_px, std::nullopt, std::nullopt});
+    m.composed.push_back({frame_index, stamp_s, kept, reduction, local_from_px, std::nullopt, std::nullopt});
     m.composed_bytes += kept.total() * kept.elemSize();
   }
   m.canvas.accumulateAlpha(warped, roi.tl(), replace);
@@ -227,24 +234,30 @@ void composeImage(OpenMosaic& m, const cv::Mat& raw, const cv::Matx33d& chain, i
   m.pending_load = nullptr;
 }
 
-/// The frame's image, from its loader when it has one. Empty (and *problem set) when the loader fails or its image
-/// does not have the announced shape.
-cv::Mat loadImage(const std::function<cv::Mat()>& load, const cv::Size& size, int channels, int index,
-                  std::string* problem) {
+/// The frame's image at 1/reduction, from its loader. Empty (and *problem set) when the loader fails or its image
+/// has neither the announced shape nor that shape reduced.
+cv::Mat loadImage(const std::function<cv::Mat(int)>& load, const cv::Size& size, int channels, int reduction,
+                  int index, std::string* problem) {
   cv::Mat image;
   try {
-    image = load();
+    image = load(reduction);
   } catch (const std::exception& e) {
     *problem = "frame " + std::to_string(index) + " skipped: its image cannot be loaded: " + e.what();
     return cv::Mat();
   }
-  if (image.size() != size || image.channels() != channels || image.depth() != CV_8U) {
+  const cv::Mat reduced = image.channels() == channels && image.depth() == CV_8U ? reduceImage(image, size, reduction)
+                                                                                 : cv::Mat();
+  if (reduced.empty()) {
+    const cv::Size expected = reducedImageSize(size, reduction);
     *problem = "frame " + std::to_string(index) + " skipped: its image is " + std::to_string(image.cols) + "x" +
                std::to_string(image.rows) + "x" + std::to_string(image.channels()) + ", announced " +
-               std::to_string(size.width) + "x" + std::to_string(size.height) + "x" + std::to_string(channels);
+               std::to_string(size.width) + "x" + std::to_string(size.height) + "x" + std::to_string(channels) +
+               (reduction > 1 ? " (or " + std::to_string(expected.width) + "x" + std::to_string(expected.height) +
+                                    " reduced by " + std::to_string(reduction) + ")"
+                              : "");
     return cv::Mat();
   }
-  return image;
+  return reduced;
 }
 
 /// True if the image placed by chain moved enough since the last composed one to be a key frame.
@@ -273,19 +286,33 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
   };
   if (image_size.empty() || (image_channels != 1 && image_channels != 3) || (!lazy && frame.image.depth() != CV_8U))
     return skip("frame " + std::to_string(frame.index) + " skipped: image must be CV_8UC1 or CV_8UC3");
-  // Loads a lazy frame's image (once); false when it cannot be had.
+  // The reduction this image is drawn at, from its pose's native GSD against the tiles' (image_reduction.h).
+  if (frame.pose) {
+    const double native_gsd_m = nativeGsd(*frame.pose);
+    if (native_gsd_m > 0.0 && std::isfinite(native_gsd_m))
+      s.image_reduction = chooseImageReduction(native_gsd_m, config_.gsd_m, config_.max_image_reduction,
+                                               std::min(s.image_reduction, config_.max_image_reduction));
+  }
+  const int reduction = std::max(1, std::min(s.image_reduction, config_.max_image_reduction));
+  // The image as drawn (at 1/reduction), loaded once; false when it cannot be had.
+  cv::Mat drawn;
   auto materialize = [&]() {
-    if (!frame.image.empty()) return true;
-    frame.image = loadImage(frame.load_image, image_size, image_channels, frame.index, &s.stats.last_problem);
-    return !frame.image.empty();
+    if (!drawn.empty()) return true;
+    if (lazy) {
+      drawn = loadImage(frame.load_image, image_size, image_channels, reduction, frame.index, &s.stats.last_problem);
+    } else {
+      drawn = reduceImage(frame.image, image_size, reduction);
+      if (drawn.empty()) s.stats.last_problem = "frame " + std::to_string(frame.index) + " skipped: cannot reduce it";
+    }
+    return !drawn.empty();
   };
   // The lighting field observes every image decoded anyway (key frames, the first image of a mosaic), before it is
   // corrected, and when none came for sample_interval_frames images one more is decoded for it: decoding is the
   // composer's main cost, and moving key frames are the decorrelated samples of the seabed the average needs.
   bool lighting_observed = false;
   auto observeLighting = [&]() {
-    if (!config_.lighting.enabled || lighting_observed || frame.image.empty()) return;
-    s.lighting.observe(frame.image);
+    if (!config_.lighting.enabled || lighting_observed || drawn.empty()) return;
+    s.lighting.observe(drawn);
     s.frames_since_lighting_sample = 0;
     lighting_observed = true;
   };
@@ -315,7 +342,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
       s.previous_in_chain = false;
       return std::nullopt;
     }
-    startMosaic(frame, false);
+    startMosaic(frame, drawn, reduction, image_size, false);
     return std::nullopt;
   }
 
@@ -370,7 +397,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
       s.tie.valid = false;  // the navigation moved: start afresh at the new pose
       if (groundFromPixel(*frame.pose, size, Eigen::Vector2d::Zero(), &p_frame) && materialize()) {
         observeLighting();
-        startMosaic(frame, false);
+        startMosaic(frame, drawn, reduction, image_size, false);
       }
       return closed;
     } else {
@@ -398,7 +425,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     // A key frame whose image cannot be loaded is left out; the chain (from the registration) goes on.
     if (materialize()) {
       observeLighting();
-      composeImage(m, frame.image, chain, frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
+      composeImage(m, drawn, reduction, chain, frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
       if (point && !m.composed.empty() && m.composed.back().index == frame.index) {
         m.composed.back().navigation_m = point->measured_m;
         m.composed.back().navigation_heading_rad = point_heading_rad;
@@ -409,14 +436,19 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
     m.pending_navigation = point ? std::optional<Eigen::Vector2d>(point->measured_m) : std::nullopt;
     m.pending_navigation_heading_rad = point_heading_rad;
     m.pending_chain = chain;
-    if (!frame.image.empty()) {
-      frame.image.copyTo(m.pending_image);  // a copy: the caller may reuse its buffer
+    m.pending_size = image_size;
+    m.pending_channels = image_channels;
+    m.pending_reduction = reduction;
+    m.pending_reduced = !drawn.empty();
+    if (!drawn.empty()) {
+      m.pending_image = drawn.clone();  // a copy: the caller may reuse its buffer
+      m.pending_load = nullptr;
+    } else if (!lazy) {
+      frame.image.copyTo(m.pending_image);  // reduced only if the mosaic closes on this image
       m.pending_load = nullptr;
     } else {
       m.pending_image.release();  // decoded only if the mosaic closes on this image
       m.pending_load = frame.load_image;
-      m.pending_size = image_size;
-      m.pending_channels = image_channels;
     }
   }
 
@@ -431,7 +463,7 @@ std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
   std::optional<ClosedMosaic> closed = closeMosaic(reason);
   if (materialize()) {  // the image also starts the next mosaic: consecutive tiles overlap
     observeLighting();
-    startMosaic(frame, true);
+    startMosaic(frame, drawn, reduction, image_size, true);
   }
   return closed;
 }
@@ -444,10 +476,11 @@ std::optional<ClosedMosaic> MosaicComposer::flush(const std::string& reason) {
   return closed;
 }
 
-void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
+void MosaicComposer::startMosaic(const ComposerFrame& frame, const cv::Mat& drawn, int reduction,
+                                 const cv::Size& image_size, bool continued) {
   Impl& s = *impl_;
   s.open.reset();
-  const cv::Size size = frame.image.size();
+  const cv::Size size = image_size;
   const Eigen::Vector2d centre_px = imageCentre(size);
   // This image's placement in UTM (utm = utm_origin + utm_from_px(px)): from its fused pose when it has one (P_first),
   // otherwise (a continued mosaic) where the closed mosaic put it.
@@ -479,8 +512,8 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
   const Eigen::Vector2d centre_utm = utm_origin + applyHomography(utm_from_px, centre_px);
   // The local frame's origin on a multiple of the GSD: the canvas grid is then aligned with round UTM coordinates.
   const Eigen::Vector2d ref(std::round(centre_utm.x() / gsd) * gsd, std::round(centre_utm.y() / gsd) * gsd);
-  auto m = std::make_unique<OpenMosaic>(frame.image.channels(), config_.block_size_px);
-  m->channels = frame.image.channels();
+  auto m = std::make_unique<OpenMosaic>(drawn.channels(), config_.block_size_px);
+  m->channels = drawn.channels();
   m->gsd_m = gsd;
   m->ref_en_m = ref;
   m->p_first = normalizeHomography(translation(utm_origin.x() - ref.x(), utm_origin.y() - ref.y()) * utm_from_px);
@@ -524,7 +557,8 @@ void MosaicComposer::startMosaic(const ComposerFrame& frame, bool continued) {
     m->tie.error_cov = s.tie.error_cov;
   }
   s.tie.valid = false;
-  composeImage(*m, frame.image, cv::Matx33d::eye(), frame.index, frame.stamp_s, config_, s.lighting, s.feather, s.stats);
+  composeImage(*m, drawn, reduction, cv::Matx33d::eye(), frame.index, frame.stamp_s, config_, s.lighting, s.feather,
+               s.stats);
   if (!m->composed.empty()) {
     m->composed.back().navigation_m = first_navigation;
     m->composed.back().navigation_heading_rad = first_navigation_heading_rad;
@@ -539,12 +573,16 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   std::unique_ptr<OpenMosaic> holder = std::move(s.open);
   OpenMosaic& m = *holder;
   // The last image before a close is always composed.
+  cv::Mat pending_drawn;
   if (m.pending && m.pending_image.empty() && m.pending_load)
-    m.pending_image =
-        loadImage(m.pending_load, m.pending_size, m.pending_channels, m.last_frame, &s.stats.last_problem);
-  if (m.pending && !m.pending_image.empty()) {
-    composeImage(m, m.pending_image, m.pending_chain, m.last_frame, m.end_time_s, config_, s.lighting, s.feather,
-                 s.stats);
+    pending_drawn = loadImage(m.pending_load, m.pending_size, m.pending_channels, m.pending_reduction, m.last_frame,
+                              &s.stats.last_problem);
+  else if (m.pending)
+    pending_drawn = m.pending_reduced ? m.pending_image
+                                      : reduceImage(m.pending_image, m.pending_size, m.pending_reduction);
+  if (m.pending && !pending_drawn.empty()) {
+    composeImage(m, pending_drawn, m.pending_reduction, m.pending_chain, m.last_frame, m.end_time_s, config_, s.lighting,
+                 s.feather, s.stats);
     if (!m.composed.empty() && m.composed.back().index == m.last_frame) {
       m.composed.back().navigation_m = m.pending_navigation;
       m.composed.back().navigation_heading_rad = m.pending_navigation_heading_rad;
@@ -623,8 +661,8 @@ std::optional<ClosedMosaic> MosaicComposer::closeMosaic(const std::string& reaso
   out.ground_origin_en_m = m.ref_en_m;
   for (const auto& c : m.composed)
     out.images.push_back(
-        {c.index, c.stamp_s, c.image, normalizeHomography(ground_from_local * c.local_from_px), c.navigation_m,
-         c.navigation_heading_rad});
+        {c.index, c.stamp_s, c.image, c.reduction, normalizeHomography(ground_from_local * c.local_from_px),
+         c.navigation_m, c.navigation_heading_rad});
   for (const auto& f : m.footprints_local) {
     std::array<Eigen::Vector2d, 4> u;
     for (int i = 0; i < 4; ++i) u[i] = m.ref_en_m + (out.resampled ? fit.apply(f[i]) : Eigen::Vector2d(f[i] + shift));

@@ -21,7 +21,7 @@ AssembledFrame* FrameAssembler::slot(std::int64_t stamp_ns, double now_s) {
   return &frame;
 }
 
-bool FrameAssembler::addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s,
+bool FrameAssembler::addImage(std::int64_t stamp_ns, ImageDecoder decode_image, double now_s,
                               cv::Size image_size, int image_channels) {
   AssembledFrame* frame = slot(stamp_ns, now_s);
   if (!frame) return false;

@@ -9,14 +9,23 @@
 
 namespace exocet_mosaic {
 
-std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded, DecodeMode mode) {
+std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded, DecodeMode mode,
+                                  int reduction) {
   decoded->image.release();
   decoded->encoding.clear();
+  if (reduction != 1 && reduction != 2 && reduction != 4 && reduction != 8)
+    return "image reduction must be 1, 2, 4 or 8, got " + std::to_string(reduction);
   // JPEG's start-of-image marker: the data says what it is, whatever the format field claims.
   const bool jpeg = message.data.size() > 2 && message.data[0] == 0xFF && message.data[1] == 0xD8;
   const bool stored_bayer = message.format.find("bayer_") != std::string::npos;
-  const int flags =
+  int flags =
       mode == DecodeMode::kGreyIfJpeg && jpeg && !stored_bayer ? cv::IMREAD_GRAYSCALE : cv::IMREAD_UNCHANGED;
+  if (jpeg && !stored_bayer && reduction > 1) {
+    // IMREAD_REDUCED_GRAYSCALE_r = 8 r, IMREAD_REDUCED_COLOR_r = 8 r + 1: grey when asked or stored grey.
+    const std::optional<DisplayShape> shape = peekDisplayShape(message);
+    const bool grey = mode == DecodeMode::kGreyIfJpeg || (shape && shape->channels == 1);
+    flags = 8 * reduction + (grey ? 0 : 1);
+  }
   cv::Mat image;
   try {
     image = cv::imdecode(message.data, flags);

@@ -27,6 +27,8 @@ void readComposer(const exocet_common::ParameterReader& p, compose::ComposerConf
   p.readInt("multiband_bands", &c->multiband_bands, 1, 10, "pyramid levels of the multi-band blender");
   p.readDouble("min_key_frame_shift_fraction", &c->min_key_frame_shift_fraction, 0.0, 1.0,
                "footprint shift (fraction of the image) between composed images, 0: every image");
+  p.readInt("max_image_reduction", &c->max_image_reduction, 1, 8,
+            "largest factor (1, 2, 4 or 8) by which images are reduced to be composed at about the tiles' GSD");
   p.readString("anchor", &c->anchor, {"similarity", "translation"}, "fit of the chain to the fused navigation");
   p.readDouble("tile_continuity_sigma_m", &c->tile_continuity_sigma_m, 0.0, 1000.0,
                "how strongly a tile is tied to the previous one where they share an image (m)");

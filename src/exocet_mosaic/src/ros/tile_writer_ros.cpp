@@ -206,7 +206,7 @@ void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
   if (!acceptTransport("raw")) return;
   acceptImage(
       msg->header,
-      [msg]() {
+      [msg](int) {  // at full size: the composer reduces it
         const cv_bridge::CvImageConstPtr shared = cv_bridge::toCvShare(msg);  // throws on a bad message
         return toDisplayImage(shared->image, msg->encoding);
       },
@@ -219,9 +219,9 @@ void TileWriterRos::onCompressed(const sensor_msgs::CompressedImageConstPtr& msg
   const std::optional<DisplayShape> shape = peekDisplayShape(*msg);
   acceptImage(
       msg->header,
-      [msg]() {
+      [msg](int reduction) {
         DecodedImage decoded;
-        const std::string error = decodeCompressedImage(*msg, &decoded);
+        const std::string error = decodeCompressedImage(*msg, &decoded, DecodeMode::kAsStored, reduction);
         if (!error.empty()) throw std::invalid_argument(error);
         return toDisplayImage(decoded.image, decoded.encoding);
       },
@@ -242,7 +242,7 @@ void TileWriterRos::checkClock(std::int64_t stamp_ns) {
   if (!newest_stamp_ns_ || stamp_ns > *newest_stamp_ns_) newest_stamp_ns_ = stamp_ns;
 }
 
-void TileWriterRos::acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
+void TileWriterRos::acceptImage(const std_msgs::Header& header, ImageDecoder decode, cv::Size image_size,
                                 int image_channels) {
   ++images_;
   last_input_wall_ = ros::WallTime::now();
@@ -409,8 +409,9 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
   compose::ComposerFrame input;
   input.index = next_frame_index_++;
   input.stamp_s = static_cast<double>(frame.stamp_ns) * 1e-9;
-  // The colour image must be undistorted as the registration undistorted its grey one.
-  std::shared_ptr<const registration::ImageUndistorter> undistorter;
+  // The colour image must be undistorted as the registration undistorted its grey one (at the reduction the composer
+  // asks for: the undistorted reduced image is the undistorted image reduced).
+  std::shared_ptr<const Undistorters> undistorters;
   if (frame.motion && frame.motion->undistorted && config_.undistort && camera_info_) {
     const sensor_msgs::CameraInfo& info = *camera_info_;
     const cv::Size size(static_cast<int>(info.width), static_cast<int>(info.height));
@@ -419,17 +420,29 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
     std::copy(info.K.begin(), info.K.end(), k.begin());
     for (size_t i = 0; i < std::min<size_t>(5, info.D.size()); ++i) d[i] = info.D[i];
     try {
-      if (!undistorter_->sameCalibration(size, k, d))
-        undistorter_ = std::make_shared<const registration::ImageUndistorter>(size, k, d);
-      if (undistorter_->active()) undistorter = undistorter_;
+      if (!undistorters_ || !(*undistorters_)[0]->sameCalibration(size, k, d)) {
+        auto made = std::make_shared<Undistorters>();
+        (*made)[0] = std::make_shared<const registration::ImageUndistorter>(size, k, d);
+        for (int i = 1; i < 4; ++i)
+          if (size.width >= (1 << i) && size.height >= (1 << i))
+            (*made)[i] = std::make_shared<const registration::ImageUndistorter>((*made)[0]->reducedBy(1 << i));
+        undistorters_ = made;
+      }
+      if ((*undistorters_)[0]->active()) undistorters = undistorters_;
     } catch (const std::invalid_argument& e) {
       reject(std::string("cannot undistort the image like the registration did: ") + e.what());
     }
   }
-  auto load = [decode = frame.decode_image, undistorter]() {
-    cv::Mat image = decode();  // throws what is wrong with the message
+  const cv::Size full_size = frame.image_size;
+  auto load = [decode = frame.decode_image, undistorters, full_size](int reduction) {
+    // A reduced decode where the format allows it (JPEG); otherwise the full image, which the composer reduces.
+    const int log2 = reduction == 8 ? 3 : reduction == 4 ? 2 : reduction == 2 ? 1 : 0;
+    const bool can_reduce = undistorters == nullptr || (*undistorters)[log2] != nullptr;
+    cv::Mat image = decode(can_reduce ? reduction : 1);  // throws what is wrong with the message
     if (image.empty()) throw std::invalid_argument("empty image");
-    return undistorter ? undistorter->apply(image) : image;
+    if (!undistorters) return image;
+    const bool full = image.size() == (*undistorters)[0]->size() || (!full_size.empty() && image.size() == full_size);
+    return (*undistorters)[full ? 0 : log2]->apply(image);
   };
   if (!frame.image_size.empty() && frame.image_channels > 0) {
     // Decoded only if the composer draws it.
@@ -438,7 +451,7 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
     input.image_channels = frame.image_channels;
   } else {
     try {
-      input.image = load();
+      input.image = load(1);
     } catch (const std::exception& e) {
       reject(std::string("image cannot be used: ") + e.what());
       return;
@@ -1387,6 +1400,7 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("open mosaic extent (m)", stats.open_extent_m);
   status.add("open mosaic memory (MB)", static_cast<double>(stats.open_memory_bytes) / 1e6);
   status.add("lighting field ready", stats.lighting_ready);
+  status.add("images composed at 1/reduction", stats.image_reduction);
   status.add("tiles written", written);
   {
     std::lock_guard<std::mutex> lock(write_mutex_);

@@ -33,6 +33,11 @@ struct ComposerConfig {
   /// Compose an image only when its footprint moved by more than this fraction of the image's smaller side since the
   /// last composed image, [0, 1] (0: every image).
   double min_key_frame_shift_fraction = 0.1;
+  /// Images are composed at 1/r of their resolution, r the largest power of two up to this ({1, 2, 4, 8}) with
+  /// native GSD x r <= gsd_m: a 4K image at 0.75 mm drawn into 5 mm tiles is composed at 3 mm (r = 4), 1/16 of its
+  /// pixels, instead of being sampled at 6.7 px per tile px (which aliases). 1: always at full resolution; with
+  /// gsd_m 0 (native) r is 1. r changes only when the native GSD leaves a 10 % band around its bounds (altitude).
+  int max_image_reduction = 8;
   /// Hand the composed images out with the closed mosaic (ClosedMosaic::images), for tiles drawn again later at other
   /// poses; they count in the open mosaic's memory.
   bool keep_composed_images = false;

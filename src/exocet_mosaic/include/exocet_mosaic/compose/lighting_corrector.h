@@ -42,7 +42,11 @@ struct LightingConfig {
   std::string validate() const;
 };
 
-/// Estimates the illumination field from the images and divides it out.
+/**
+ * @brief Estimates the illumination field from the images and divides it out. The field lives at a working
+ * resolution: it fits every image whose working-resolution size and channel count are its own, i.e. the camera's
+ * images at full resolution and reduced (image_reduction.h) alike.
+ */
 class LightingCorrector {
  public:
   /// Throws std::invalid_argument with config.validate()'s text.
@@ -53,8 +57,8 @@ class LightingCorrector {
   const LightingConfig& config() const { return config_; }
 
   /**
-   * @brief Adds an image (CV_8UC1 or CV_8UC3) to the field estimate. Images of another size or channel count than
-   * the field's restart the estimate. @return true if the image was used (not too dark).
+   * @brief Adds an image (CV_8UC1 or CV_8UC3) to the field estimate. An image of another shape (aspect, channels)
+   * than the field's restarts the estimate. @return true if the image was used (not too dark).
    */
   bool observe(const cv::Mat& image);
 
@@ -77,7 +81,7 @@ class LightingCorrector {
   /**
    * @brief The gain correct() applies, averaged over each block of a grid of `grid` blocks laid on an image of
    * `image_size` (CV_32FC(channels)): the levels of an image summarised by blocks, corrected. Empty when the field is
-   * not ready or is of another image size.
+   * not ready or is of another shape.
    */
   cv::Mat gainGrid(const cv::Size& image_size, const cv::Size& grid) const;
   void reset();
@@ -85,18 +89,21 @@ class LightingCorrector {
   LightingCorrector clone() const;
 
  private:
-  cv::Mat smallGain() const;  // the gains at the working resolution, CV_32FC(n)
-  cv::Mat gainMap() const;    // full-size CV_32FC(n) gains, cached per field version
+  cv::Mat smallGain() const;                       // the gains at the working resolution, CV_32FC(n)
+  cv::Mat gainMap(const cv::Size& size) const;     // CV_32FC(n) gains of that size, cached per field version
+  cv::Size workingSize(const cv::Size& image_size) const;  // the field's size for images of that size
+  bool fits(const cv::Size& image_size, int channels) const;
 
   LightingConfig config_;
   cv::Mat mean_;  // running mean at the working resolution, CV_32FC(n)
-  cv::Size image_size_;
+  cv::Size working_size_;
   int channels_ = 0;
   int frames_used_ = 0;
   int frames_rejected_ = 0;
   long version_ = 0;
   mutable long gain_version_ = -1;
   mutable cv::Mat gain_;
+  mutable cv::Size gain_size_;
 };
 
 }  // namespace compose

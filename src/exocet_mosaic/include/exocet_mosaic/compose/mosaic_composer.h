@@ -48,10 +48,12 @@ struct ComposerFrame {
   double stamp_s = 0;  ///< acquisition time (s)
   cv::Mat image;       ///< CV_8UC3 BGR or CV_8UC1, undistorted
   /// Instead of `image`, for images costly to decode (compressed streams): called only for the images the composer
-  /// draws (key frames, a mosaic's first and last) or samples for the lighting, at most once per frame. It must give
-  /// an image of image_size and image_channels; if it throws or gives another shape, the frame is skipped and the
-  /// problem reported in the stats.
-  std::function<cv::Mat()> load_image;
+  /// draws (key frames, a mosaic's first and last) or samples for the lighting, at most once per frame, with the
+  /// reduction the composer draws it at (ComposerConfig::max_image_reduction). It gives image_channels channels,
+  /// either at image_size (the composer reduces it) or already reduced (between floor and ceil of image_size /
+  /// reduction: a scaled JPEG decode, see image_reduction.h); if it throws or gives another shape, the frame is
+  /// skipped and the problem reported in the stats.
+  std::function<cv::Mat(int reduction)> load_image;
   cv::Size image_size;     ///< with load_image
   int image_channels = 0;  ///< with load_image: 1 or 3
   /// Registration: previous frame's px -> this frame's px; empty = failed / none.
@@ -65,9 +67,10 @@ struct ComposedImage {
   double stamp_s = 0;  ///< acquisition time (s)
   /// CV_8UC3 or CV_8UC1, the mosaic's channels, undistorted, BEFORE the lighting correction: a tile drawn again later
   /// corrects it with the lighting field as it is then (lightingSnapshot()), the field of the dive's first minutes
-  /// being the least settled.
+  /// being the least settled. At the resolution it was composed at (1/reduction of the camera's).
   cv::Mat image;
-  /// Image px -> ground (E - ground_origin E, N - ground_origin N) in metres, as the tile placed it.
+  int reduction = 1;  ///< the camera's pixels per pixel of `image`, per axis (image_reduction.h)
+  /// Pixel of `image` -> ground (E - ground_origin E, N - ground_origin N) in metres, as the tile placed it.
   cv::Matx33d ground_from_px = cv::Matx33d::eye();
   /// Where the image's own fused pose puts its centre (same ground frame); empty when it had no pose or its pose was
   /// left out of the tile's fit (an outlier).
@@ -113,6 +116,7 @@ struct ComposerStats {
   double open_extent_m = 0;           ///< larger of the open mosaic's east / north extents
   int open_frames = 0;                ///< images added to the open mosaic
   bool lighting_ready = false;
+  int image_reduction = 1;  ///< the reduction images are composed at now (ComposerConfig::max_image_reduction)
   std::string last_problem;  ///< last skipped image or jump, in words
 };
 
@@ -156,7 +160,9 @@ class MosaicComposer {
   LightingCorrector lightingSnapshot() const;
 
  private:
-  void startMosaic(const ComposerFrame& frame, bool continued);  // continued: tied to the mosaic just closed
+  // drawn: the frame's image at 1/reduction of image_size; continued: tied to the mosaic just closed.
+  void startMosaic(const ComposerFrame& frame, const cv::Mat& drawn, int reduction, const cv::Size& image_size,
+                   bool continued);
   std::optional<ClosedMosaic> closeMosaic(const std::string& reason);
 
   struct Impl;

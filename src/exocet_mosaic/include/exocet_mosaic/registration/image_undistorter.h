@@ -33,8 +33,19 @@ class ImageUndistorter {
   /// The undistorted image (the input itself when there is no distortion). @throws std::invalid_argument on size.
   cv::Mat apply(const cv::Mat& image) const;
 
+  /**
+   * @brief The same undistortion for the images reduced by `reduction` (2, 4 or 8; 1 gives a copy): it takes an
+   * image decoded at 1/reduction, ceil(size / reduction) (libjpeg's scaled decoding; pixel x centred on full px
+   * r x + (r - 1) / 2), and gives floor(size / reduction) px whose intrinsics are this one's cameraMatrix() reduced
+   * the same way: the undistorted reduced image is the undistorted image reduced. @throws std::invalid_argument.
+   */
+  ImageUndistorter reducedBy(int reduction) const;
+  /// Size of the images apply() takes (size() for the full-resolution undistorter).
+  const cv::Size& inputSize() const { return input_size_; }
+
  private:
   cv::Size size_;
+  cv::Size input_size_;
   std::array<double, 9> k_{};
   std::array<double, 5> d_{};
   Eigen::Matrix3d camera_matrix_ = Eigen::Matrix3d::Identity();

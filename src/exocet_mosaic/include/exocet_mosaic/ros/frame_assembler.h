@@ -35,10 +35,14 @@ struct PosePart {
   Eigen::Quaterniond world_from_camera = Eigen::Quaterniond::Identity();
 };
 
+/// Decodes an image at 1/reduction (1, 2, 4, 8) of its size where the format allows it (a JPEG's scaled decoding),
+/// otherwise at full size. Throws what is wrong with the message.
+using ImageDecoder = std::function<cv::Mat(int reduction)>;
+
 /// What is known of one image stamp. The image is decoded only when the frame is used.
 struct AssembledFrame {
   std::int64_t stamp_ns = 0;
-  std::function<cv::Mat()> decode_image;  ///< empty: no image received for this stamp
+  ImageDecoder decode_image;  ///< empty: no image received for this stamp
   cv::Size image_size;                    ///< of the decoded image, when known without decoding (else empty)
   int image_channels = 0;                 ///< of the decoded image, when known without decoding (else 0)
   std::optional<MotionPart> motion;
@@ -61,7 +65,7 @@ class FrameAssembler {
   /// an image of that stamp is already waiting (a duplicated stamp: the first image is kept, counted in
   /// duplicateImages()).
   /// image_size and image_channels: the decoded image's shape when the message tells it (else leave them empty).
-  bool addImage(std::int64_t stamp_ns, std::function<cv::Mat()> decode_image, double now_s,
+  bool addImage(std::int64_t stamp_ns, ImageDecoder decode_image, double now_s,
                 cv::Size image_size = cv::Size(), int image_channels = 0);
   bool addMotion(std::int64_t stamp_ns, const MotionPart& motion, double now_s);
   bool addPose(std::int64_t stamp_ns, const PosePart& pose, double now_s);

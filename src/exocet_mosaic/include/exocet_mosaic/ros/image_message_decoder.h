@@ -30,10 +30,12 @@ enum class DecodeMode {
 /**
  * Decodes a CompressedImage (JPEG or PNG). The format field starts with the original encoding ("bgr8; jpeg
  * compressed bgr8"); a Bayer image compressed losslessly decodes to one channel and keeps its Bayer encoding.
+ * @param reduction 1, 2, 4 or 8: a JPEG that is not Bayer decodes at 1/reduction of its size, rounded up (libjpeg's
+ * scaled decoding: fewer pixels to convert and upsample, the entropy decoding stays); other images at full size.
  * @return an empty string, or what is wrong with the message (the image is then empty).
  */
 std::string decodeCompressedImage(const sensor_msgs::CompressedImage& message, DecodedImage* decoded,
-                                  DecodeMode mode = DecodeMode::kAsStored);
+                                  DecodeMode mode = DecodeMode::kAsStored, int reduction = 1);
 
 /// Size and channels of the image toDisplayImage() would make of a compressed message, read from the JPEG or PNG
 /// header without decoding the pixels. Empty if the header cannot be read.

@@ -95,7 +95,7 @@ class TileWriterRos {
   void onReconfigure(exocet_mosaic::TileWriterConfig& config, uint32_t level);
   bool onFlush(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool acceptTransport(const std::string& transport);
-  void acceptImage(const std_msgs::Header& header, std::function<cv::Mat()> decode, cv::Size image_size,
+  void acceptImage(const std_msgs::Header& header, ImageDecoder decode, cv::Size image_size,
                    int image_channels);
   void checkClock(std::int64_t stamp_ns);
   /// Adds a part to the assembler under the lock, then composes what is ready; false (nothing done) when `add`
@@ -197,8 +197,9 @@ class TileWriterRos {
   std::vector<double> tile_fused_sigmas_m_;  ///< fused 1-sigma of the open mosaic's images (m)
   sensor_msgs::CameraInfoConstPtr camera_info_;
   // Shared with the loaders of images not decoded yet (the composer may decode one after a calibration change).
-  std::shared_ptr<const registration::ImageUndistorter> undistorter_ =
-      std::make_shared<const registration::ImageUndistorter>();
+  // Element i undistorts the images decoded at 1/2^i (i = 0..3: reductions 1, 2, 4, 8), all made from one calibration.
+  using Undistorters = std::array<std::shared_ptr<const registration::ImageUndistorter>, 4>;
+  std::shared_ptr<const Undistorters> undistorters_;
   std::optional<int> utm_zone_;
   bool northern_ = true;
   /// The fused poses' frame when it is not the UTM frame (~frame_id): the dive is not geo-referenced and the tiles are
