@@ -1,7 +1,9 @@
 // Benchmark of the frame-to-frame registration (2D3 sections 3.1, 3.2): accuracy against the simulator's ground
 // truth over a 2000-frame dive with turbid and dark stretches, agreement with a SIFT + RANSAC reference on the real
 // Sparus AUV frames, and speed on one thread, side by side with OpenCV's ECC (affine, pyramid) and a feature
-// pipeline (ORB + estimateAffinePartial2D). Writes registration.json (and keeps the keys another bench added).
+// pipeline (ORB + estimateAffinePartial2D); and the same dive filmed by the PAL, HD and 4K UHD camera presets, each
+// registered with its registration preset (errors also in HD pixels). Writes registration.json (and keeps the keys
+// another bench added).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -32,6 +34,7 @@
 #include "exocet_mosaic/sim/image_motion_truth.h"
 #include "exocet_common/json_file.h"
 #include "exocet_mosaic/sim/rendered_dive.h"
+#include "exocet_mosaic/video/mosaic_presets.h"
 #include "exocet_common/command_line.h"
 #include "exocet_common/testing/paths.h"
 #include "shared_data.h"
@@ -249,7 +252,8 @@ int main(int argc, char** argv) {
   exocet_common::BenchmarkPaths paths;
   const std::string config_dir = exocet_common::testing::configDir();
   int frames_limit = 0, wreck_frames_limit = 0;
-  std::vector<std::string> part_list = {"accuracy", "peers", "speed", "wreck"}, method_list;
+  int preset_frames = 250;
+  std::vector<std::string> part_list = {"accuracy", "peers", "speed", "wreck", "presets"}, method_list;
   CLI::App app(
       "bench_registration: accuracy and speed of the frame-to-frame registration (KLT, RMR, auto) on a\n"
       "simulated dive and the Sparus AUV frames, beside OpenCV's ECC and an ORB feature pipeline.\n"
@@ -266,11 +270,16 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--only", part_list,
                  "comma-separated subset of accuracy (simulated dive and Sparus), peers (OpenCV ECC\n"
-                 "and ORB), speed (ours, one thread, PAL and HD), wreck (KLT and RMR over strong relief);\n"
+                 "and ORB), speed (ours, one thread, PAL and HD), wreck (KLT and RMR over strong relief),\n"
+                 "presets (the camera presets pal, hd, uhd with their registration presets, errors in HD px);\n"
                  "default all")
       ->type_name("PARTS")
       ->delimiter(',')
-      ->check(CLI::IsMember({"accuracy", "peers", "speed", "wreck"}));
+      ->check(CLI::IsMember({"accuracy", "peers", "speed", "wreck", "presets"}));
+  app.add_option("--preset-frames", preset_frames, "frames of the dive per camera preset (presets part)")
+      ->type_name("N")
+      ->check(exocet_common::atLeast(10))
+      ->capture_default_str();
   app.add_option("--methods", method_list,
                  "comma-separated subset of klt, rmr, auto, klt_similarity, rmr_similarity, klt_affine,\n"
                  "rmr_affine (accuracy), and of klt, rmr, auto (speed); default all")
@@ -284,7 +293,7 @@ int main(int argc, char** argv) {
   for (const std::string& m : method_list)
     if (!m.empty()) methods.insert(m);
   const bool accuracy = parts.count("accuracy"), peers = parts.count("peers"), timing = parts.count("speed"),
-             wreck = parts.count("wreck");
+             wreck = parts.count("wreck"), presets = parts.count("presets");
   auto wanted = [&methods](const std::string& key) { return methods.empty() || methods.count(key) > 0; };
   cv::setNumThreads(1);
   std::cout << std::unitbuf;  // progress lines appear as they happen, also when redirected to a file
@@ -420,6 +429,44 @@ int main(int argc, char** argv) {
         peerScore(hd.gray, hd_truth, 50, [](const cv::Mat& a, const cv::Mat& b) { return eccAffine(a, b); });
     json["ecc_fps_hd"] = hd_ecc.fps;
     std::cout << "ECC affine HD: " << hd_ecc.fps << " pairs/s\n";
+  }
+
+  // ---- 2b. The camera presets: the same dive filmed in PAL, HD and 4K UHD, each registered with its registration
+  // preset (config/registration/<camera>_survey.yaml, as registration_node loads it). Errors also in pixels of the
+  // HD image (x 1920 / width), so that cameras compare on the ground; CPU per frame of this thread.
+  if (presets) {
+    const std::string duration = "duration_s=" + std::to_string(preset_frames / 25.0 - 0.01);
+    for (const std::string camera : {"pal", "hd", "uhd"}) {
+      const sim::DiveDescription d = sim::loadDiveDescription(config_dir + "/dives/bench_registration.yaml",
+                                                              {"camera.preset=" + camera, duration});
+      t0 = Clock::now();
+      const sim::RenderedDive clip = sim::renderDiveCached(d, 2, out_dir + "/cache");
+      std::cout << "rendered " << clip.gray.size() << " " << camera << " frames in " << msSince(t0) / 1000.0 << " s\n";
+      if (clip.gray.size() < 2) continue;
+      std::vector<Eigen::Matrix3d> clip_truth(clip.gray.size(), Eigen::Matrix3d::Identity());
+      for (size_t i = 1; i < clip.gray.size(); ++i)
+        clip_truth[i] =
+            sim::seabedPlaneHomography(clip.camera, clip.local_from_camera[i - 1], clip.local_from_camera[i]);
+      const video::RegistrationPreset preset =
+          video::loadRegistrationPreset(config_dir + "/registration/" + camera + "_survey.yaml");
+      SequenceRegistrar r(makeRegistrar(preset.registration), preset.sequence);
+      const double to_hd = 1920.0 / clip.gray.front().cols;
+      const double cpu0 = threadCpuSeconds();
+      const SequenceScore sc = evaluateSequence(r, clip.gray, clip.stamps_s, clip_truth, 2.0 / to_hd);
+      const double cpu_ms = 1000.0 * (threadCpuSeconds() - cpu0) / double(clip.gray.size());
+      const std::string key = "preset_" + camera;
+      json[key + "_median_px"] = sc.median_px;
+      json[key + "_p95_px"] = sc.p95_px;
+      json[key + "_median_hd_px"] = sc.median_px * to_hd;
+      json[key + "_p95_hd_px"] = sc.p95_px * to_hd;
+      json[key + "_failure_rate"] = sc.failure_rate;
+      json[key + "_gross_failure_rate"] = sc.gross_failure_rate;
+      json[key + "_cpu_ms_per_frame"] = cpu_ms;
+      std::cout << key << " (" << clip.gray.front().cols << "x" << clip.gray.front().rows << ", " << clip.gray.size()
+                << " frames): median " << sc.median_px << " px, p95 " << sc.p95_px << " px; in HD px median "
+                << sc.median_px * to_hd << ", p95 " << sc.p95_px * to_hd << "; failed " << sc.failures << ", gross "
+                << sc.gross_failures << "; " << cpu_ms << " ms CPU per frame\n";
+    }
   }
 
   // ---- 3. Real seabed: Sparus AUV frames against SIFT + RANSAC ----
