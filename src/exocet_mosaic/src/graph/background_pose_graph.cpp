@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "covariance_check.h"
+#include "exocet_common/background_priority.h"
 
 namespace exocet_mosaic {
 namespace graph {
@@ -168,6 +169,8 @@ void BackgroundPoseGraph::publish(const SolveReport& report, bool settled) {
 }
 
 void BackgroundPoseGraph::run() {
+  // Solves may come late (bounded in time, the chain never waits for them); the chain's frames may not.
+  exocet_common::lowerThisThreadPriority();
   const auto idle_wait = std::chrono::duration<double>(config_.idle_wait_s);
   bool need_settle = false;
   std::vector<Input> batch;

@@ -8,6 +8,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/background_priority.h"
+
 namespace exocet_mosaic {
 namespace graph {
 
@@ -130,6 +132,8 @@ LoopCloserStats LoopCloser::stats() const {
 }
 
 void LoopCloser::run() {
+  // Loops may be verified late (the graph takes them whenever they come); the chain's frames may not wait.
+  exocet_common::lowerThisThreadPriority();
   for (;;) {
     Pending pending;
     {

@@ -6,8 +6,6 @@
 #include <numeric>
 #include <stdexcept>
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <cv_bridge/cv_bridge.h>
@@ -18,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/background_priority.h"
 #include "exocet_common/free_heap.h"
 #include "exocet_common/json_file.h"
 #include "exocet_common/unit_quaternion.h"
@@ -924,7 +923,7 @@ void TileWriterRos::updateMosaicVrt(bool now) {
 
 void TileWriterRos::rerenderLoop() {
   // Drawing tiles again may wait; the chain may not: this thread yields the CPU to the node's others.
-  ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), 10);
+  exocet_common::lowerThisThreadPriority();
   std::unique_lock<std::mutex> lock(rerender_mutex_);
   ros::WallTime last_save = ros::WallTime::now(), last_adjustment = ros::WallTime::now();
   while (!stop_rerender_) {

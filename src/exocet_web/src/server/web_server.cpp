@@ -1,8 +1,6 @@
 #include "exocet_web/server/web_server.h"
 
-#include <sys/resource.h>
 #include <sys/stat.h>
-#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -18,6 +16,7 @@
 
 #include <httplib.h>
 
+#include "exocet_common/background_priority.h"
 #include "exocet_web/server/request_path.h"
 
 namespace exocet_web {
@@ -68,7 +67,7 @@ class WebServer::ConnectionPool : public httplib::TaskQueue {
       : max_clients_(max_clients), counters_(std::move(counters)) {
     for (int i = 0; i < max_clients + kSpareThreads; ++i) {
       threads_.emplace_back([this, nice] {
-        if (nice > 0) ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), nice);
+        if (nice > 0) exocet_common::lowerThisThreadPriority(nice);
         run();
       });
     }

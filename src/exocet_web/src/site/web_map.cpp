@@ -1,8 +1,6 @@
 #include "exocet_web/site/web_map.h"
 
-#include <sys/resource.h>
 #include <sys/stat.h>
-#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "exocet_common/atomic_file.h"
+#include "exocet_common/background_priority.h"
 #include "exocet_common/json_file.h"
 #include "exocet_common/utm_grid.h"
 #include "exocet_web/site/site_assets.h"
@@ -357,8 +356,7 @@ void WebMap::enqueueGeoTiff(const std::string& path) {
 }
 
 void WebMap::run() {
-  if (config_.worker_nice > 0)
-    ::setpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)), config_.worker_nice);
+  if (config_.worker_nice > 0) exocet_common::lowerThisThreadPriority(config_.worker_nice);
   const auto period =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config_.state_period_s));
   auto last_write = Clock::now() - period;
