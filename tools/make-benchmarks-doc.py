@@ -430,7 +430,9 @@ BENCHMARKS = {
             'Graph modes: each dive is replayed with `pose_graph:=false` then `pose_graph:=true` (`--graph-modes`); '
             'the figures of the run with the graph have the plain names, those of the run without it the suffix '
             '`_without_graph`. `rate_no_drop` (top level `<dive>_rate_no_drop`): the replay rate at which no frame '
-            'was dropped, null when every attempt dropped frames.',
+            'was dropped, null when every attempt dropped frames. PAL and HD are also replayed once at the archive rate '
+            '(16x, 4x; `probe_*`): when no frame drops there, that rate is the `rate_no_drop`; the other figures are '
+            'those of the first rate (8x, 2x), the probe\'s tiles measured beside them (`*_probe_live_*`).',
         ],
         'targets': [
             'PAL replayed at 8x real time (200 frames/s) and HD at 2x (50 frames/s) with no frame dropped.',
@@ -485,6 +487,15 @@ BENCHMARKS = {
                                             'misaligned, max (px)'),
             ('overlap_misalignment_median_px', 'every overlapping pair misaligned, median (px)'),
             ('overlap_pairs', 'overlapping pairs'),
+            ('*probe_live_overlap_max_px*', 'archive-rate probe: live tiles, every overlapping pair misaligned, max (px)'),
+            ('*probe_live_landmark_p95_m*', 'archive-rate probe: live tiles, landmark error p95 (m)'),
+            ('*probe_rate*', 'archive-rate probe: replay rate (x real time)'),
+            ('*probe_frames_dropped*', 'archive-rate probe: frames dropped'),
+            ('*probe_cpu_ms_per_frame*', 'archive-rate probe: CPU per frame of the bag, per node (ms)'),
+            ('*probe_chain_fps*', 'archive-rate probe: chain throughput (frames/s)'),
+            ('*probe_peak_rss_mb*', 'archive-rate probe: peak resident memory (MB)'),
+            ('*probe_overlap_misalignment_max_px*', 'archive-rate probe: every overlapping pair misaligned, max (px)'),
+            ('*probe_landmark_error_p95_m*', 'archive-rate probe: landmark error, p95 (m)'),
             ('*_live_overlap_max_px', 'live tiles: every overlapping pair misaligned, max (px)'),
             ('*_live_landmark_p95_m', 'live tiles: landmark error, p95 (m)'),
             ('*rate_no_drop', 'replay rate reached with no frame dropped (x real time; n/a: every attempt dropped)'),
