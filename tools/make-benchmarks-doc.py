@@ -130,12 +130,19 @@ BENCHMARKS = {
             'of the objects is what a method must not report as the seabed\'s motion.',
             'Sparus: every consecutive pair registered (homography) and compared, by the same corner distance, with '
             'a SIFT + RANSAC (MAGSAC++) homography of the same pair.',
+            'Camera presets (`preset_*`, issue 23): the first 250 frames (10 s) of the dive rendered by the `pal`, '
+            '`hd` and `uhd` camera presets (720x576, 1920x1080, 3840x2160), each registered by the front-end with its '
+            'registration preset (`config/registration/<camera>_survey.yaml`, read by `video::loadRegistrationPreset` '
+            'as registration_node reads it). Errors in the camera\'s pixels and in pixels of the HD image (x 1920 / '
+            'width: the same ground distance for every camera); gross failures above 2 HD px; CPU of the thread per '
+            'frame.',
             'Node: `registration_node` with `src/exocet_mosaic/config/registration/pal_survey.yaml` on a private ROS master; the '
             'bag\'s compressed images played at `node_replay_rate` times real time; peak resident memory (VmHWM) '
             'and motions published per second, JPEG decoding included.',
         ],
         'targets': [
             'KLT at least 400 frames/s on PAL and 150 on HD; RMR at least 100 and 30 (one thread).',
+            'UHD (issue 23): corner error in HD pixels at most the HD preset\'s.',
             'Wreck: KLT and RMR failures at most 0.5 % at strides 1 and 4; KLT median at most 0.3 px, p95 at most '
             '1 px, NEES ratio between 0.5 and 2 (stride 1).',
             'Median error at most 0.1 px, p95 at most 0.5 px, gross failures at most 0.5 % (homography model).',
@@ -144,6 +151,10 @@ BENCHMARKS = {
             'registers with the homography for that reason.',
         ],
         'figures': [
+            ('preset_*_hd_px', 'camera preset: corner error in pixels of the HD image'),
+            ('preset_*_cpu_ms_per_frame', 'camera preset: CPU per frame, one thread (ms)'),
+            ('preset_*_px', 'camera preset: corner error in the camera\'s pixels'),
+            ('preset_*_rate', 'camera preset: failure rates'),
             ('*_dark_median_px', 'median corner error (px) in the dark stretch'),
             ('wreck_*_failure_rate_s1', 'wreck: fraction of consecutive pairs reported as failed'),
             ('wreck_*_failure_rate_s4', 'wreck: fraction of pairs 4 frames apart reported as failed'),
