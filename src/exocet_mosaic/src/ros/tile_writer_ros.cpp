@@ -750,6 +750,9 @@ void TileWriterRos::writerLoop() {
 // Tiles that follow the pose graph.
 
 void TileWriterRos::onCorrections(const exocet_msgs::PositionCorrectionsConstPtr& msg) {
+  // Input too for ~exit_when_idle_s: after a fast replay the graph still closes the loops it fell behind on (its
+  // workers yield the CPU to the chain), and the tiles follow those before the writer exits.
+  last_input_wall_ = ros::WallTime::now();
   const std::size_t n = msg->stamps.size();
   if (msg->east_m.size() != n || msg->north_m.size() != n) {
     reject("graph corrections whose stamps, east_m and north_m differ in length: ignored");
