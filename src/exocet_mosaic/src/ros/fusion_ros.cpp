@@ -94,7 +94,10 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   subscribe(&camera_info_sub_, config_.camera_info_topic, 200, &FusionRos::onCameraInfo);
   subscribe(&datum_sub_, config_.datum_topic, 1, &FusionRos::onDatum);
 
-  odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.odometry_out_topic, 100);
+  // Per subscriber link: one that lags (a fast replay on a loaded machine) must not silently lose poses or heights,
+  // which the tile writer needs for every image.
+  constexpr uint32_t kOutgoingQueue = 1000;
+  odometry_pub_ = nh_.advertise<nav_msgs::Odometry>(config_.odometry_out_topic, kOutgoingQueue);
   fused_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.path_topic, 1, true);
   nav_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.navigation_path_topic, 1, true);
   image_path_pub_ = nh_.advertise<nav_msgs::Path>(config_.image_path_topic, 1, true);
@@ -112,7 +115,7 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     }
   }
   if (!config_.camera_height_topic.empty())
-    camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, 100);
+    camera_height_pub_ = nh_.advertise<sensor_msgs::Range>(config_.camera_height_topic, kOutgoingQueue);
   if (!config_.datum_out_topic.empty())
     datum_pub_ = nh_.advertise<exocet_msgs::GeoDatum>(config_.datum_out_topic, 1, true);
   initial_pose_srv_ = private_nh_.advertiseService("set_initial_pose", &FusionRos::onSetInitialPose, this);

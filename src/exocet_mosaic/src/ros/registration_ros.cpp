@@ -20,6 +20,10 @@ namespace exocet_mosaic {
 using diagnostic_msgs::DiagnosticStatus;
 namespace reg = registration;
 
+namespace {
+constexpr uint32_t kOutgoingQueue = 1000;  // motions per subscriber link (5 s at 8x PAL replay)
+}  // namespace
+
 RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private_nh) {
   RegistrationNodeConfig config;
   config.registration = readRegistrationConfig(private_nh);
@@ -48,7 +52,9 @@ RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private
 RegistrationRos::RegistrationRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh), private_nh_(private_nh), config_(readRegistrationNodeConfig(private_nh)), image_transport_(nh) {
   sequence_ = std::make_unique<reg::SequenceRegistrar>(reg::makeRegistrar(config_.registration), config_.sequence);
-  motion_publisher_ = nh_.advertise<exocet_msgs::ImageMotion>(config_.motion_topic, 100);
+  // Each subscriber (fusion, tile writer, a recorder) has its own outgoing queue of this length: one that lags by
+  // more (a fast replay on a loaded machine) silently loses motions, and a lost motion breaks its chain.
+  motion_publisher_ = nh_.advertise<exocet_msgs::ImageMotion>(config_.motion_topic, kOutgoingQueue);
   if (config_.transport != "compressed")
     raw_subscriber_ = image_transport_.subscribe(config_.image_topic, config_.queue_size, &RegistrationRos::onImage,
                                                  this, image_transport::TransportHints("raw"));
