@@ -3,6 +3,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "exocet_common/free_heap.h"
+
 namespace exocet_web {
 
 namespace {
@@ -51,6 +53,10 @@ WebMapRos::WebMapRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   if (!config_.usbl_topic.empty()) usbl_sub_ = nh_.subscribe(config_.usbl_topic, 100, &WebMapRos::onUsbl, this);
   if (!config_.imu_topic.empty()) imu_sub_ = nh_.subscribe(config_.imu_topic, 200, &WebMapRos::onImu, this);
   timer_ = nh_.createWallTimer(ros::WallDuration(0.5), &WebMapRos::onTimer, this);
+  // The cutter's warps and the server's threads free large buffers in several threads for hours: their pages go back
+  // to the system (as the fusion and the tile writer do).
+  free_heap_timer_ = nh_.createWallTimer(ros::WallDuration(10.0),
+                                         [](const ros::WallTimerEvent&) { exocet_common::releaseFreeHeap(); });
   updater_.setHardwareID("web_map");
   updater_.add("web map", this, &WebMapRos::diagnose);
 }

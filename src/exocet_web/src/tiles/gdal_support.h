@@ -16,8 +16,9 @@ namespace tiles {
 namespace detail {
 
 /// GDAL's block cache unless GDAL_CACHEMAX says otherwise: its default, 5 % of the machine's memory (1.2 GB on a 24 GB
-/// station), fills over a long dive and reads as a node that grows; the cutter reads each GeoTIFF block once per cut.
-constexpr GIntBig kGdalCacheBytes = GIntBig(128) << 20;
+/// station), fills over a long dive and reads as a node that grows. The cutter reads each GeoTIFF block once per cut,
+/// so a cache only has to hold one cut's window.
+constexpr GIntBig kGdalCacheBytes = GIntBig(32) << 20;
 
 inline void registerGdalOnce() {
   static std::once_flag once;

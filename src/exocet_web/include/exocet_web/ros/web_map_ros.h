@@ -63,6 +63,7 @@ class WebMapRos {
   diagnostic_updater::Updater updater_;
   ros::Subscriber tile_sub_, odometry_sub_, datum_sub_, usbl_sub_, imu_sub_;
   ros::WallTimer timer_;  ///< vehicle events held back, diagnostics every second, the tiles folder looked at
+  ros::WallTimer free_heap_timer_;  ///< hands the heap's free pages back every 10 s
   ros::WallTime last_diagnostics_;
   ros::WallTime last_folder_look_;
 
