@@ -91,19 +91,6 @@ TEST(ImageReduction, BlockAveragesAndScaledJpegDecodingShareThePixelFrame) {
   EXPECT_TRUE(ec::reduceImage(full(cv::Rect(0, 0, 20, 20)), full.size(), 2).empty());
 }
 
-TEST(ImageReduction, ReducedCameraMatrixProjectsToReducedPixels) {
-  const std::array<double, 9> k{1800, 0, 1919.5, 0, 1800, 1079.5, 0, 0, 1};
-  const std::array<double, 9> k4 = ec::reducedCameraMatrix(k, 4);
-  const Eigen::Vector3d p(0.3, -0.2, 2.5);
-  const cv::Vec3d full = cv::Matx33d(k.data()) * cv::Vec3d(p.x(), p.y(), p.z());
-  const cv::Vec3d reduced = cv::Matx33d(k4.data()) * cv::Vec3d(p.x(), p.y(), p.z());
-  const cv::Vec3d back = ec::fullFromReducedPx(4) * cv::Vec3d(reduced[0] / reduced[2], reduced[1] / reduced[2], 1.0);
-  EXPECT_NEAR(back[0], full[0] / full[2], 1e-9);
-  EXPECT_NEAR(back[1], full[1] / full[2], 1e-9);
-  EXPECT_DOUBLE_EQ(k4[0], 450.0);
-  EXPECT_DOUBLE_EQ(k4[2], (1919.5 - 1.5) / 4);  // the centre of the reduced image
-}
-
 TEST(ImageReduction, ChoiceFollowsTheGroundSampleDistancesWithABand) {
   EXPECT_EQ(ec::chooseImageReduction(0.00075, 0.005, 8, 0), 4);  // 4K at 2.5 m into 5 mm tiles: 3 mm
   EXPECT_EQ(ec::chooseImageReduction(0.0015, 0.005, 8, 0), 2);   // HD

@@ -12,7 +12,7 @@ from exocet_msgs.msg import ImageMotion, PositionCorrections
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image, Range
 
-from tile_writer_node_check import publish_frames
+from tile_writer_node_check import publish_frames, wait_for_subscribers
 
 FOLDER = os.path.join(os.environ.get('ROS_HOME', '/tmp'), 'test_tile_writer_idle_exit')
 
@@ -27,11 +27,7 @@ class TileWriterIdleExitTest(unittest.TestCase):
         odometry = rospy.Publisher('/mosaic/odometry', Odometry, queue_size=100)
         heights = rospy.Publisher('/mosaic/camera_height', Range, queue_size=100)
         corrections = rospy.Publisher('/mosaic/graph_corrections', PositionCorrections, queue_size=10)
-        deadline = time.time() + 20.0
-        while time.time() < deadline and (images.get_num_connections() == 0 or motions.get_num_connections() == 0
-                                          or odometry.get_num_connections() == 0
-                                          or corrections.get_num_connections() == 0):
-            time.sleep(0.1)
+        self.assertTrue(wait_for_subscribers([images, motions, odometry, corrections]), 'tile writer subscribed')
         if os.path.exists(summary):  # left by an earlier run in the same ROS_HOME
             os.remove(summary)
         start = rospy.Time(1000.0)

@@ -28,6 +28,14 @@ def seabed(seed=3):
     return (255 * (smooth - smooth.min()) / np.ptp(smooth)).astype(np.uint8)
 
 
+def wait_for_subscribers(publishers, timeout_s=20.0):
+    """Waits (at most timeout_s) until every publisher has a subscriber; True when they all have."""
+    deadline = time.time() + timeout_s
+    while time.time() < deadline and any(p.get_num_connections() == 0 for p in publishers):
+        time.sleep(0.1)
+    return all(p.get_num_connections() > 0 for p in publishers)
+
+
 def publish_frames(publishers, count, start, bad_pose_at=None, bad_image_at=None, first=0):
     """Publishes `count` frames of a nadir camera moving east over seabed(), 0.2 s apart from `start`: the image, its
     motion from the previous one, the fused pose (NaN at bad_pose_at) and the camera height; at bad_image_at a corrupt

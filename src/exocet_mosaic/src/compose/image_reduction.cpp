@@ -19,14 +19,6 @@ cv::Matx33d fullFromReducedPx(int reduction) {
   return cv::Matx33d(r, 0, c, 0, r, c, 0, 0, 1);
 }
 
-std::array<double, 9> reducedCameraMatrix(const std::array<double, 9>& k, int reduction) {
-  const cv::Matx33d full(k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7], k[8]);
-  const cv::Matx33d reduced = fullFromReducedPx(reduction).inv() * full;
-  std::array<double, 9> out{};
-  for (int i = 0; i < 9; ++i) out[i] = reduced.val[i];
-  return out;
-}
-
 cv::Mat reduceImage(const cv::Mat& image, const cv::Size& full_size, int reduction) {
   if (image.empty() || !isImageReduction(reduction)) return cv::Mat();
   if (reduction == 1) return image.size() == full_size ? image : cv::Mat();

@@ -271,10 +271,9 @@ bool isKeyFrame(const OpenMosaic& m, const cv::Matx33d& chain, const cv::Size& s
 
 }  // namespace
 
-std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& given) {
+std::optional<ClosedMosaic> MosaicComposer::add(const ComposerFrame& frame) {
   Impl& s = *impl_;
   ++s.stats.frames_added;
-  ComposerFrame frame = given;  // a shallow copy: its image may be loaded below
   const bool lazy = frame.image.empty() && frame.load_image;
   const cv::Size image_size = lazy ? frame.image_size : frame.image.size();
   const int image_channels = lazy ? frame.image_channels : frame.image.channels();

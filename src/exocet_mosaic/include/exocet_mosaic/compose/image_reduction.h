@@ -11,8 +11,6 @@
  */
 #pragma once
 
-#include <array>
-
 #include <opencv2/core.hpp>
 
 namespace exocet_mosaic {
@@ -26,9 +24,6 @@ cv::Size reducedImageSize(const cv::Size& full_size, int reduction);
 
 /// Reduced px -> full px: [r 0 (r-1)/2; 0 r (r-1)/2; 0 0 1].
 cv::Matx33d fullFromReducedPx(int reduction);
-
-/// The camera matrix (row-major) of the reduced images: fullFromReducedPx(r)^-1 K.
-std::array<double, 9> reducedCameraMatrix(const std::array<double, 9>& k, int reduction);
 
 /**
  * @brief The image at 1/reduction of full_size: an image of full_size is block-averaged (INTER_AREA on the whole
