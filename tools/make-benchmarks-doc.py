@@ -548,13 +548,14 @@ BENCHMARKS = {
     },
     'web_map.json': {
         'title': 'Live web map (web_map_node)',
-        'command': 'devel/lib/exocet_web/bench_web_map --output-dir out/bench [--rate R] [--clients N] [--no-stress]',
+        'command': 'devel/lib/exocet_web/bench_web_map --output-dir out/bench [--rate R] [--throughput-rate R] [--clients N] '
+                   '[--no-stress]',
         'measures': 'How fast a GeoTIFF tile written by the chain reaches the pages watching the live web map, what '
                     'cutting it into web tiles costs, and whether browsers watching slow the chain down.',
         'data': 'The sample out-and-back dive (`bags/sample_out_and_back.bag`: 435 PAL images, 87 s, four tiles of '
                 '150 images), replayed through `replay.launch web:=true`.',
         'method': [
-            'Three replays on a private ROS master: without any client; with N lightweight clients (Python threads '
+            'Three replays at `rate` on a private ROS master: without any client; with N lightweight clients (Python threads '
             'in the benchmark process, each holding the /events stream as a page does and fetching, of each tile '
             'announced, what a page following the vehicle shows: its web tiles of the finest zoom, where web_map.js '
             'follows, inside a 1280 x 800 window centred on the vehicle\'s last position; a tile version with none '
@@ -567,7 +568,10 @@ BENCHMARKS = {
             'clients; failed requests by HTTP status or, without an answer, by error. CPU per web tile: '
             'web_map_node\'s user + system time over the web tiles it cut (all levels), in the run without clients. '
             'Chain frames per second: image pairs registered (/mosaic/motion) per wall second between the first and '
-            'the last.',
+            'the last, on two more replays at `throughput_rate` (8x: the chain, not the bag, sets the pace; at 1x '
+            'both runs register at the camera\'s 5 frames/s whatever the clients do, `live_chain_fps_*`), with 0 '
+            'and N clients; frames dropped: images in the bag, less the first, less the pairs registered; CPU per '
+            'frame of each chain node (its user + system time over the pairs registered).',
         ],
         'targets': ['A new tile on the pages within 2 s of being written; the chain\'s frames per second the same '
                     'with 20 clients as with none (within the run-to-run noise).'],
@@ -577,7 +581,12 @@ BENCHMARKS = {
             ('node_max_cut_latency_ms', 'web_map_node: tile message queued -> its finest level cut and announced, max (ms)'),
             ('cpu_ms_per_web_tile', 'web_map_node CPU per web tile cut (ms)'),
             ('wall_ms_per_web_tile', 'cutting wall time per web tile (ms)'),
-            ('chain_fps_*', 'image pairs registered per second'),
+            ('chain_fps_*', 'image pairs registered per second, at `throughput_rate`'),
+            ('chain_frames_dropped_*', 'frames the chain did not register, at `throughput_rate`'),
+            ('chain_cpu_ms_per_frame_*', 'CPU of each chain node per frame, at `throughput_rate` (ms)'),
+            ('live_chain_*', 'the same at `rate` (live)'),
+            ('throughput_rate', 'replay speed of the chain pace runs'),
+            ('images_in_bag', 'camera images in the bag'),
             ('web_tiles_cut', 'web tiles cut (every level)'),
             ('geotiff_tiles_cut', 'GeoTIFF tiles cut'),
             ('client_requests', 'requests of the clients'),
