@@ -14,10 +14,12 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 
 #include "exocet_common/command_line.h"
 #include "exocet_common/json_file.h"
+#include "exocet_mosaic/graph/background_pose_graph.h"
 #include "exocet_mosaic/graph/pose_graph.h"
 
 namespace {
@@ -206,6 +208,7 @@ struct GrowthRow {
   int resolve_keyframes_optimized = 0;
   int resolve_iterations = 0;
   double full_resolve_cpu_s = 0.0;
+  double marginals_cpu_s = 0.0;  ///< every key frame's position marginals after the full re-solve
 };
 
 }  // namespace
@@ -247,6 +250,10 @@ int main(int argc, char** argv) {
     if (n <= keyframes && (sizes.empty() || n > sizes.back())) sizes.push_back(n);
   std::vector<GrowthRow> rows;
   double rms_with_loops = 0.0;
+  std::vector<double> sigma_radial_m;
+  double within_1sigma = -1.0, mahalanobis_median = -1.0, sigma_radial_median_m = -1.0;
+  double every_marginal_cpu_s = 0.0, interpolation_error_max = 0.0;
+  const int marginals_cap = BackgroundPoseGraphConfig().marginals_max_key_frames;
   int false_accepted = 0, true_accepted = 0, true_in_graph = 0, false_in_graph = 0, loops_in_graph = 0;
   for (const int n : sizes) {
     GrowthRow row;
@@ -276,9 +283,36 @@ int main(int argc, char** argv) {
       g.addLoop(two->from, two->to, two->delta, two->covariance);
       row.full_resolve_cpu_s = g.solveFull().cpu_s;
     }
+    // The marginals as the node computes them (BackgroundPoseGraph's cap on the key frames computed).
+    t0 = processCpuSeconds();
+    const std::vector<Eigen::Matrix2d> capped = g.positionCovariances(marginals_cap);
+    row.marginals_cpu_s = processCpuSeconds() - t0;
     rows.push_back(row);
     if (n == sizes.back()) {
       rms_with_loops = survey.rmsError(g, n);
+      t0 = processCpuSeconds();
+      const std::vector<Eigen::Matrix2d> marginals = g.positionCovariances();  // every key frame
+      every_marginal_cpu_s = processCpuSeconds() - t0;
+      for (size_t i = 0; i < marginals.size() && capped.size() == marginals.size(); ++i) {
+        const double exact = std::sqrt(marginals[i].trace());
+        interpolation_error_max = std::max(interpolation_error_max, std::abs(std::sqrt(capped[i].trace()) - exact) / exact);
+      }
+      // The graph's own 1-sigma against its true error (simulated factors: the truth is known).
+      std::vector<double> mahalanobis;
+      for (int i = 0; i < n && marginals.size() == static_cast<size_t>(n); ++i) {
+        const Eigen::Vector2d e = g.pose(i).position_en_m - survey.truth[i].position_en_m;
+        mahalanobis.push_back(std::sqrt(e.dot(marginals[i].ldlt().solve(e))));
+        sigma_radial_m.push_back(std::sqrt(marginals[i].trace()));
+      }
+      if (!mahalanobis.empty()) {
+        within_1sigma = std::count_if(mahalanobis.begin(), mahalanobis.end(), [](double d) { return d <= 1.0; }) /
+                        static_cast<double>(mahalanobis.size());
+        std::nth_element(mahalanobis.begin(), mahalanobis.begin() + mahalanobis.size() / 2, mahalanobis.end());
+        mahalanobis_median = mahalanobis[mahalanobis.size() / 2];
+        std::nth_element(sigma_radial_m.begin(), sigma_radial_m.begin() + sigma_radial_m.size() / 2,
+                         sigma_radial_m.end());
+        sigma_radial_median_m = sigma_radial_m[sigma_radial_m.size() / 2];
+      }
       for (size_t i = 0; i < survey.loops.size(); ++i) {
         if (loop_of_input[i] < 0) continue;
         const bool accepted = g.loopAccepted(loop_of_input[i]);
@@ -311,20 +345,21 @@ int main(int argc, char** argv) {
   std::cout << std::setw(10) << "keyframes" << std::setw(8) << "loops" << std::setw(12) << "build s" << std::setw(14)
             << "full solve s" << std::setw(8) << "iters" << std::setw(12) << "resolve s" << std::setw(14)
             << "window (kf)" << std::setw(8) << "iters" << std::setw(16) << "full resolve s"
-            << "   (CPU seconds)\n";
+            << std::setw(14) << "marginals s" << "   (CPU seconds)\n";
   nlohmann::json growth = nlohmann::json::array();
   for (const GrowthRow& r : rows) {
     std::cout << std::fixed << std::setw(10) << r.keyframes << std::setw(8) << r.loops << std::setprecision(3)
               << std::setw(12) << r.build_cpu_s << std::setw(14) << r.full_solve_cpu_s << std::setw(8)
               << r.full_solve_iterations << std::setw(12) << r.resolve_cpu_s << std::setw(14)
               << r.resolve_keyframes_optimized << std::setw(8) << r.resolve_iterations << std::setw(16)
-              << r.full_resolve_cpu_s << "\n";
+              << r.full_resolve_cpu_s << std::setw(14) << r.marginals_cpu_s << "\n";
     growth.push_back({{"keyframes", r.keyframes},
                       {"loops", r.loops},
                       {"full_solve_cpu_s", r.full_solve_cpu_s},
                       {"resolve_cpu_s", r.resolve_cpu_s},
                       {"resolve_keyframes_optimized", r.resolve_keyframes_optimized},
-                      {"full_resolve_cpu_s", r.full_resolve_cpu_s}});
+                      {"full_resolve_cpu_s", r.full_resolve_cpu_s},
+                      {"marginals_cpu_s", r.marginals_cpu_s}});
   }
   const GrowthRow& last = rows.back();
   std::cout << std::setprecision(3) << "position RMS error vs truth: initial (compass-aided dead reckoning) "
@@ -333,9 +368,22 @@ int main(int argc, char** argv) {
             << "loops accepted: true " << true_accepted << "/" << true_in_graph << ", false " << false_accepted << "/"
             << false_in_graph << "\n"
             << "targets: resolve " << last.resolve_cpu_s << " s CPU (<= 1 s), peak RSS " << std::setprecision(1)
-            << peak_mb << " MB (< 500 MB), false loops accepted " << false_accepted << " (0)\n";
+            << peak_mb << " MB (< 500 MB), false loops accepted " << false_accepted << " (0)\n"
+ << "the graph's own 1-sigma: " << marginals_cap << " key frames' marginals computed and the others interpolated "
+            << std::setprecision(3) << last.marginals_cpu_s << " s CPU (every key frame's " << every_marginal_cpu_s
+            << " s; radial 1-sigma interpolated within " << 100.0 * interpolation_error_max
+            << " %); radial median " << sigma_radial_median_m << " m; key frames within it (Mahalanobis <= 1) "
+            << within_1sigma << " (0.39 if calibrated), Mahalanobis median " << mahalanobis_median << " (1.18)\n";
 
   json["keyframes"] = keyframes;
+  json["marginals_cpu_s"] = last.marginals_cpu_s;
+  json["marginals_key_frames_computed"] = marginals_cap;
+  json["marginals_every_key_frame_cpu_s"] = every_marginal_cpu_s;
+  json["marginals_interpolation_error_max"] = interpolation_error_max;
+  json["marginals_sigma_radial_median_m"] = sigma_radial_median_m;
+  // For errors drawn from the graph's own covariance: 0.39 and 1.18.
+  json["marginals_within_1sigma_fraction"] = within_1sigma;
+  json["marginals_mahalanobis_median"] = mahalanobis_median;
   json["loops"] = loops_in_graph;
   json["resolve_cpu_s"] = last.resolve_cpu_s;
   json["resolve_keyframes_optimized"] = last.resolve_keyframes_optimized;

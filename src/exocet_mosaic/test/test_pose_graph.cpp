@@ -135,6 +135,13 @@ TEST(PoseGraph, TwoFixesMatchDenseLeastSquares) {
     ASSERT_TRUE(c.has_value());
     EXPECT_NEAR((*c)(0, 0), inverse(k, k), 1e-9 + 1e-6 * inverse(k, k)) << "key frame " << k;
   }
+  // All the key frames' position blocks at once: the same east variances, and each the 3x3 block's corner.
+  const std::vector<Eigen::Matrix2d> positions = g.positionCovariances();
+  ASSERT_EQ(positions.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(positions[k](0, 0), inverse(k, k), 1e-9 + 1e-6 * inverse(k, k)) << "key frame " << k;
+    EXPECT_TRUE(positions[k].isApprox(g.covariance(k)->topLeftCorner<2, 2>(), 1e-9)) << "key frame " << k;
+  }
 }
 
 /// Truth and noisy odometry of an out-and-back: out east along north = 0, back west along north = 2 m.
@@ -175,6 +182,34 @@ struct OutAndBack {
     return e;
   }
 };
+
+// With a cap on the key frames computed, the computed ones (evenly spread, the first and the last) are exact and the
+// others are interpolated between them: along an odometry chain with fixes the variance varies smoothly.
+TEST(PoseGraph, PositionCovariancesWithACapInterpolateBetweenComputedKeyFrames) {
+  const OutAndBack run;
+  PoseGraph g;
+  run.fill(&g, true);
+  for (size_t k = 0; k < run.truth.size(); k += 10)
+    EXPECT_TRUE(g.addPositionFix(0.4 * k, run.truth[k].position_en_m, diag2(0.05)));
+  ASSERT_TRUE(g.solveFull().converged);
+  const std::vector<Eigen::Matrix2d> every = g.positionCovariances();
+  const std::vector<Eigen::Matrix2d> capped = g.positionCovariances(12);
+  const int n = static_cast<int>(run.truth.size());
+  ASSERT_EQ(every.size(), static_cast<size_t>(n));
+  ASSERT_EQ(capped.size(), static_cast<size_t>(n));
+  // 82 key frames, at most 12 computed: a stride of 9 (0, 9, ..., 81).
+  double max_relative = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double exact = std::sqrt(every[k].trace()), approximate = std::sqrt(capped[k].trace());
+    if (k % 9 == 0 || k == n - 1) {
+      EXPECT_TRUE(capped[k].isApprox(every[k], 1e-9)) << "computed key frame " << k;
+    }
+    max_relative = std::max(max_relative, std::abs(approximate - exact) / exact);
+  }
+  EXPECT_GT(max_relative, 0.0) << "nothing was interpolated";
+  EXPECT_LT(max_relative, 0.25);
+  EXPECT_EQ(g.positionCovariances(1000).size(), static_cast<size_t>(n));
+}
 
 // A false loop 1 m off with a 5 mm 1-sigma is switched off and does not bend the map; the true loops in the same
 // graph are accepted and remove most of the drift. Odometry alone first (a long yaw drift), then with headings.
@@ -528,6 +563,50 @@ TEST(BackgroundPoseGraph, ProducerAndWorkerAgreeWithSynchronousSolve) {
   background.stop();
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
   EXPECT_FALSE(background.waitIdle(0.1)) << "stopped";
+}
+
+// Once the graph is settled, the worker computes the key frames' position marginals (within its duty cycle) and
+// publishes them with the solution they are of; they equal the synchronous graph's. With a duty cycle of 0, never.
+TEST(BackgroundPoseGraph, PublishesThePositionMarginalsOfTheSettledGraph) {
+  const SurveyInputs survey(6, 60, 5);
+  PoseGraph sync;
+  for (size_t i = 0; i < survey.steps.size(); ++i) survey.add(&sync, i);
+  ASSERT_TRUE(sync.solveFull().converged);
+  const std::vector<Eigen::Matrix2d> expected = sync.positionCovariances();
+  ASSERT_EQ(expected.size(), sync.numKeyFrames());
+
+  for (const double duty : {0.5, 0.0}) {
+    BackgroundPoseGraphConfig config;
+    config.marginals_duty_cycle = duty;
+    BackgroundPoseGraph background(config);
+    for (size_t i = 0; i < survey.steps.size(); ++i) survey.add(&background, i);
+    ASSERT_TRUE(background.waitIdle(60.0));
+    std::shared_ptr<const GraphSnapshot> s = background.snapshot();
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (duty > 0 && s->marginals_sequence + 1 < s->sequence && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      s = background.snapshot();
+    }
+    if (duty == 0.0) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      s = background.snapshot();
+      EXPECT_TRUE(s->position_covariance_m2.empty());
+      EXPECT_EQ(s->marginals_sequence, 0u);
+      continue;
+    }
+    ASSERT_TRUE(s->settled);
+    // The snapshot after the settled one carries the marginals of its solution.
+    EXPECT_EQ(s->marginals_sequence + 1, s->sequence);
+    EXPECT_GT(s->marginals_cpu_s, 0.0);
+    ASSERT_EQ(s->position_covariance_m2.size(), s->key_frames.size());
+    double max_relative = 0.0;
+    for (size_t k = 0; k < expected.size(); ++k) {
+      ASSERT_TRUE(s->position_covariance_m2[k].allFinite()) << "key frame " << k;
+      max_relative =
+          std::max(max_relative, (s->position_covariance_m2[k] - expected[k]).norm() / expected[k].norm());
+    }
+    EXPECT_LT(max_relative, 1e-4);
+  }
 }
 
 // stop() while the worker is busy with a long backlog returns promptly.

@@ -68,6 +68,9 @@ class TileWriterGraphTest(unittest.TestCase):
         msg.header.frame_id = 'utm'
         msg.stamps = [start, start + rospy.Duration(0.2 * frames)]
         msg.east_m, msg.north_m = [MOVE_EAST_M] * 2, [0.0] * 2
+        # The graph's 1-sigma of the first key frame; none yet for the second (NaN: added after its marginals).
+        msg.east_sigma_m, msg.north_sigma_m = [0.02, float('nan')], [0.03, float('nan')]
+        msg.east_north_correlation = [-0.25, float('nan')]
         msg.header.stamp = msg.stamps[-1]
         corrections.publish(msg)
         deadline = time.time() + 30.0
@@ -107,6 +110,26 @@ class TileWriterGraphTest(unittest.TestCase):
                 counted = max(counted, int(values.get('tiles drawn again', 0)))
             time.sleep(0.2)
         self.assertGreaterEqual(counted, len(first), '/diagnostics counts the tiles drawn again')
+
+        # The corrections are saved beside the kept images (at most every 10 s) with the graph's 1-sigma, for the
+        # checks made after the dive; a key frame without one has empty sigma columns.
+        saved = os.path.join(os.path.dirname(redrawn[min(redrawn)].geotiff_path), '.exocet_images',
+                             'graph_corrections.csv')
+        deadline = time.time() + 15.0
+        rows = []
+        while time.time() < deadline:
+            if os.path.exists(saved):
+                with open(saved) as f:
+                    rows = [line.strip().split(',') for line in f]
+                if len(rows) == 3 and len(rows[0]) == 6:  # not an earlier run's file
+                    break
+            time.sleep(0.5)
+        self.assertEqual(len(rows), 3, 'graph_corrections.csv: a header and two key frames (%s)' % rows)
+        self.assertEqual(rows[0], ['stamp_s', 'east_m', 'north_m', 'east_sigma_m', 'north_sigma_m',
+                                   'east_north_correlation'])
+        self.assertAlmostEqual(float(rows[1][1]), MOVE_EAST_M, places=6)
+        self.assertEqual([float(v) for v in rows[1][3:]], [0.02, 0.03, -0.25])
+        self.assertEqual(rows[2][3:], ['', '', ''])
 
 
 if __name__ == '__main__':

@@ -8,6 +8,7 @@ Tiles are numbered NAME_NNNN.tif; a tile re-rendered is NAME_NNNN_vK.tif (K >= 2
 of an index is the tile (tile_paths).
 """
 import glob
+import json
 import math
 import os
 import re
@@ -398,3 +399,79 @@ def overlap_colour_figures(tiles, pairs, erode_px=OVERLAP_ERODE_PX):
     return {'overlap_level_step_max_grey': max(steps) if steps else None,
             'overlap_abs_diff_median_grey': histogram_median(pooled), 'overlap_colour_pairs': len(steps),
             'overlap_colour_pixels': int(pooled.sum()), 'overlap_colour_per_pair': per_pair}
+
+
+def read_graph_sigmas(path):
+    """The pose graph's 1-sigma at its key frames, from the tile writer's graph_corrections.csv (columns
+    east_sigma_m, north_sigma_m, east_north_correlation; rows without them are skipped). Returns (stamps_s, covariances
+    (n, 2, 2) m^2), both empty when the file has no sigma."""
+    stamps, covariances = [], []
+    if not os.path.exists(path):
+        return np.zeros(0), np.zeros((0, 2, 2))
+    with open(path) as f:
+        header = f.readline().strip().split(',')
+        if 'east_sigma_m' not in header:
+            return np.zeros(0), np.zeros((0, 2, 2))
+        col = {name: i for i, name in enumerate(header)}
+        for line in f:
+            fields = line.strip().split(',')
+            try:
+                se, sn = float(fields[col['east_sigma_m']]), float(fields[col['north_sigma_m']])
+                rho = float(fields[col['east_north_correlation']])
+                stamps.append(float(fields[col['stamp_s']]))
+            except (ValueError, IndexError):
+                continue
+            covariances.append([[se * se, rho * se * sn], [rho * se * sn, sn * sn]])
+    return np.array(stamps), np.array(covariances).reshape(-1, 2, 2)
+
+
+def recorded_image_centres(records_dir):
+    """(stamp_s, easting_m, northing_m) of the centre of every image the tile writer kept (its tile_*.json records),
+    where its record places it."""
+    centres = []
+    for path in sorted(glob.glob(os.path.join(records_dir, 'tile_*.json'))):
+        with open(path) as f:
+            record = json.load(f)
+        origin = record['ground_origin_en_m']
+        for image in record['images']:
+            h = np.array(image['ground_from_px'], float).reshape(3, 3)
+            p = h @ np.array([0.5 * image['width_px'], 0.5 * image['height_px'], 1.0])
+            centres.append((image['stamp_s'], origin[0] + p[0] / p[2], origin[1] + p[1] / p[2]))
+    return np.array(centres).reshape(-1, 3)
+
+
+def graph_sigma_check(observations, marks, records_dir):
+    """The landmark errors of a dive's tiles against the pose graph's own 1-sigma where they lie: each found landmark
+    takes the marginal covariance of the key frame nearest in time to the kept image whose centre is nearest to it.
+
+    Returns None without sigmas, else a dict: landmarks (checked), radial_median_m and radial_min_m (sqrt(sigma_E^2 +
+    sigma_N^2)), within_radial_sigma_fraction (error <= that; 0.63 for errors drawn from an isotropic Gaussian of that
+    covariance), mahalanobis_median / _p95 (sqrt(e^T C^-1 e): 1.18 / 2.45 for such errors), within_1sigma_fraction
+    (Mahalanobis <= 1; 0.39 for such errors). The errors of nearby landmarks share the graph's offset there, so they
+    are not independent draws."""
+    stamps, covariances = read_graph_sigmas(os.path.join(records_dir, 'graph_corrections.csv'))
+    centres = recorded_image_centres(records_dir)
+    if len(stamps) == 0 or len(centres) == 0:
+        return None
+    by_id = {m['id']: m for m in marks}
+    radial, within_radial, mahalanobis = [], [], []
+    for o in observations:
+        if not o.get('found') or o['landmark'] not in by_id:
+            continue
+        mark = by_id[o['landmark']]
+        nearest = int(np.argmin(np.hypot(centres[:, 1] - mark['easting_m'], centres[:, 2] - mark['northing_m'])))
+        k = int(np.argmin(np.abs(stamps - centres[nearest, 0])))
+        c = covariances[k]
+        e = np.array([o['de_m'], o['dn_m']])
+        r = math.sqrt(c[0, 0] + c[1, 1])
+        radial.append(r)
+        within_radial.append(o['error_m'] <= r)
+        mahalanobis.append(math.sqrt(float(e @ np.linalg.solve(c, e))))
+    if not radial:
+        return None
+    return {'landmarks': len(radial), 'radial_median_m': float(np.median(radial)),
+            'radial_min_m': float(np.min(radial)),
+            'within_radial_sigma_fraction': float(np.mean(within_radial)),
+            'mahalanobis_median': float(np.median(mahalanobis)),
+            'mahalanobis_p95': float(np.percentile(mahalanobis, 95)),
+            'within_1sigma_fraction': float(np.mean(np.array(mahalanobis) <= 1.0))}

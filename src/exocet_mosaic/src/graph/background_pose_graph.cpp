@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
 #include "covariance_check.h"
 #include "exocet_common/background_priority.h"
+#include "exocet_common/cpu_time.h"
 
 namespace exocet_mosaic {
 namespace graph {
@@ -24,6 +26,10 @@ std::string BackgroundPoseGraphConfig::validate() const {
   if (!g.empty()) err << "graph: " << g << "; ";
   if (!(idle_wait_s > 0.0) || !std::isfinite(idle_wait_s))
     err << "idle_wait_s = " << idle_wait_s << " out of range (0, inf); ";
+  if (!(marginals_duty_cycle >= 0.0 && marginals_duty_cycle <= 1.0))
+    err << "marginals_duty_cycle = " << marginals_duty_cycle << " out of range [0, 1]; ";
+  if (marginals_max_key_frames < 2 || marginals_max_key_frames > 1000000)
+    err << "marginals_max_key_frames = " << marginals_max_key_frames << " out of range [2, 1000000]; ";
   std::string s = err.str();
   if (!s.empty()) s.resize(s.size() - 2);
   return s;
@@ -163,9 +169,46 @@ void BackgroundPoseGraph::publish(const SolveReport& report, bool settled) {
   for (size_t i = 0; i < graph_.numLoops(); ++i) s->loop_accepted[i] = graph_.loopAccepted(static_cast<int>(i));
   s->report = report;
   s->last_error = last_error_;
+  if (marginals_sequence_ > 0) {
+    // Aligned with key_frames; both id lists increase.
+    const Eigen::Matrix2d unknown = Eigen::Matrix2d::Constant(std::numeric_limits<double>::quiet_NaN());
+    s->position_covariance_m2.reserve(s->key_frames.size());
+    size_t m = 0;
+    for (const KeyFramePose& k : s->key_frames) {
+      while (m < marginals_ids_.size() && marginals_ids_[m] < k.id) ++m;
+      s->position_covariance_m2.push_back(m < marginals_ids_.size() && marginals_ids_[m] == k.id ? marginals_m2_[m]
+                                                                                                   : unknown);
+    }
+    s->marginals_sequence = marginals_sequence_;
+    s->marginals_cpu_s = marginals_cpu_s_;
+  }
   std::shared_ptr<const GraphSnapshot> published = s;
   std::atomic_store(&snapshot_, published);
   if (on_snapshot_) on_snapshot_(published);
+}
+
+bool BackgroundPoseGraph::marginalsDue() const {
+  return config_.marginals_duty_cycle > 0.0 && settled_since_marginals_ &&
+         std::chrono::steady_clock::now() >= next_marginals_;
+}
+
+void BackgroundPoseGraph::computeMarginals() {
+  const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = exocet_common::threadCpuSeconds();
+  std::vector<Eigen::Matrix2d> marginals = graph_.positionCovariances(config_.marginals_max_key_frames);
+  marginals_cpu_s_ = exocet_common::threadCpuSeconds() - cpu0;
+  const auto wall1 = std::chrono::steady_clock::now();
+  settled_since_marginals_ = false;
+  next_marginals_ = wall1 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                (wall1 - wall0) * (1.0 / config_.marginals_duty_cycle));
+  if (marginals.empty()) {
+    last_error_ = "the marginals of the key frames could not be computed (rank-deficient graph)";
+    return;
+  }
+  marginals_ids_ = graph_.keyFrameIds();
+  marginals_m2_ = std::move(marginals);
+  marginals_sequence_ = sequence_;  // the solution of the snapshot last published
+  publish(last_report_, true);
 }
 
 void BackgroundPoseGraph::run() {
@@ -175,19 +218,29 @@ void BackgroundPoseGraph::run() {
   bool need_settle = false;
   std::vector<Input> batch;
   while (true) {
+    bool marginals = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (queue_.empty() && !need_settle) {
-        busy_ = false;
-        idle_.notify_all();
-        wake_.wait_for(lock, idle_wait, [&] { return stopping_ || !queue_.empty(); });
+        marginals = marginalsDue();  // still busy: waitIdle() waits for marginals that are due
+        if (!marginals) {
+          busy_ = false;
+          idle_.notify_all();
+          wake_.wait_for(lock, idle_wait, [&] { return stopping_ || !queue_.empty(); });
+        }
       }
       if (stopping_) break;
-      if (queue_.empty() && !need_settle) continue;
-      busy_ = true;
-      batch.clear();
-      batch.swap(queue_);
-      interrupt_ = false;
+      if (!marginals) {
+        if (queue_.empty() && !need_settle) continue;
+        busy_ = true;
+        batch.clear();
+        batch.swap(queue_);
+        interrupt_ = false;
+      }
+    }
+    if (marginals) {
+      computeMarginals();
+      continue;
     }
     if (!batch.empty()) {
       for (const Input& input : batch) {
@@ -218,6 +271,8 @@ void BackgroundPoseGraph::run() {
       const bool settled = report.full && report.converged;
       need_settle = config_.settle_with_full_solve && !settled;
       publish(report, settled || !config_.settle_with_full_solve);
+      last_report_ = report;
+      settled_since_marginals_ = settled || !config_.settle_with_full_solve;
     } else {
       // The queue ran dry: settle the whole graph, giving way to new input.
       graph_.setInterruptCheck([this] { return stop_flag_.load() || interrupt_.load(); });
@@ -228,6 +283,8 @@ void BackgroundPoseGraph::run() {
         if (!queue_.empty()) need_settle = config_.settle_with_full_solve;
       }
       publish(report, report.converged);
+      last_report_ = report;
+      settled_since_marginals_ = report.converged;
     }
   }
   graph_.setInterruptCheck(nullptr);

@@ -1,7 +1,5 @@
 #include "exocet_mosaic/graph/pose_graph.h"
 
-#include <time.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -13,6 +11,7 @@
 #include <Eigen/Dense>
 
 #include "covariance_check.h"
+#include "exocet_common/cpu_time.h"
 
 namespace exocet_mosaic {
 namespace graph {
@@ -115,11 +114,7 @@ struct PriorResidual {
   }
 };
 
-double threadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
+using exocet_common::threadCpuSeconds;
 
 void configureSolver(const PoseGraphConfig& config, ceres::Solver::Options* solver_options) {
   ceres::Solver::Options& options = *solver_options;
@@ -644,6 +639,56 @@ std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
   Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c;
   if (!covariance.GetCovarianceBlock(block, block, c.data())) return std::nullopt;
   return Eigen::Matrix3d(c);
+}
+
+std::vector<Eigen::Matrix2d> PoseGraph::positionCovariances(int max_computed) const {
+  const int n = static_cast<int>(keyframes_.size());
+  if (n == 0) return {};
+  // The key frames computed: every stride-th, and the last (at most floor((n - 1) / stride) + 2 <= max_computed).
+  const int spans = std::max(1, max_computed - 2);
+  const int stride = max_computed > 0 && n > max_computed ? (n - 1 + spans - 1) / spans : 1;
+  std::vector<int> computed;
+  for (int i = 0; i < n; i += stride) computed.push_back(i);
+  if (computed.back() != n - 1) computed.push_back(n - 1);
+
+  PoseGraph& self = const_cast<PoseGraph&>(*this);  // as covariance(): the blocks are read, not changed
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  int held = 0;
+  self.buildProblem(std::vector<char>(keyframes_.size(), 1), false, &problem, &held);
+  std::vector<std::pair<const double*, const double*>> blocks;
+  blocks.reserve(computed.size());
+  for (const int i : computed) {
+    double* state = self.keyframes_[i].state;
+    if (!problem.HasParameterBlock(state)) return {};
+    blocks.emplace_back(state, state);
+  }
+  ceres::Covariance::Options options;
+  options.sparse_linear_algebra_library_type =
+      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE : ceres::EIGEN_SPARSE;
+  options.num_threads = 1;  // a background task: it must not take the chain's cores
+  ceres::Covariance covariance(options);
+  if (!covariance.Compute(blocks, &problem)) return {};
+  std::vector<Eigen::Matrix2d> at_computed;
+  at_computed.reserve(blocks.size());
+  Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c;
+  for (const auto& block : blocks) {
+    if (!covariance.GetCovarianceBlock(block.first, block.second, c.data())) return {};
+    at_computed.push_back(c.topLeftCorner<2, 2>());
+  }
+  std::vector<Eigen::Matrix2d> out(n);
+  for (size_t j = 0; j < computed.size(); ++j) {
+    out[computed[j]] = at_computed[j];
+    if (j + 1 == computed.size()) break;
+    const int a = computed[j], b = computed[j + 1];
+    for (int i = a + 1; i < b; ++i) {
+      const double t = static_cast<double>(i - a) / (b - a);
+      out[i] = (1.0 - t) * at_computed[j] + t * at_computed[j + 1];
+    }
+  }
+  return out;
 }
 
 }  // namespace graph

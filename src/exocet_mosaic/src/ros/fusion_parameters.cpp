@@ -217,6 +217,8 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
                   "with ~pose_graph: find, verify and add loops live from the key frames' images (~loop_image_topic)");
   if (c.loop_closure && !c.pose_graph)
     throw std::invalid_argument("parameter ~loop_closure is true but ~pose_graph is false: loops need the pose graph");
+  params.readDouble("graph_marginals_duty_cycle", &c.graph_marginals_duty_cycle, 0.0, 1.0,
+                    "with ~pose_graph: share of the graph worker's time spent on the key frames' 1-sigma (0: none)");
   params.readOptionalString(
       "loop_image_folder", &c.loop_image_folder,
       "folder of the loop closer's key-frame images beyond the few in memory; empty: all in memory");

@@ -947,7 +947,9 @@ void FusionRos::publishPaths() {
 void FusionRos::startGraph() {
   loop_closer_.reset();  // stops its worker before the graph it feeds goes
   if (graph_) graph_->stop();
-  graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph::BackgroundPoseGraphConfig());
+  graph::BackgroundPoseGraphConfig graph_config;
+  graph_config.marginals_duty_cycle = config_.graph_marginals_duty_cycle;
+  graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph_config);
   feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
   if (config_.loop_closure) {
     graph::LoopCloserConfig loop_config;
@@ -1097,7 +1099,9 @@ void FusionRos::publishGraphPath() {
   if (snapshot == last_corrections_snapshot_) return;
   exocet_msgs::PositionCorrections corrections;
   corrections.header.frame_id = world_frame_;
-  for (const graph::KeyFramePose& k : snapshot->key_frames) {
+  const bool with_sigmas = snapshot->position_covariance_m2.size() == snapshot->key_frames.size();
+  for (std::size_t i = 0; i < snapshot->key_frames.size(); ++i) {
+    const graph::KeyFramePose& k = snapshot->key_frames[i];
     const auto filter = key_frame_filter_en_m_.find(k.id);
     if (filter == key_frame_filter_en_m_.end()) continue;
     ros::Time stamp;
@@ -1105,6 +1109,13 @@ void FusionRos::publishGraphPath() {
     corrections.stamps.push_back(stamp);
     corrections.east_m.push_back(k.pose.position_en_m.x() - filter->second.x());
     corrections.north_m.push_back(k.pose.position_en_m.y() - filter->second.y());
+    if (with_sigmas) {
+      const Eigen::Matrix2d& c = snapshot->position_covariance_m2[i];  // NaN for a key frame newer than the marginals
+      const double sigma_e = std::sqrt(c(0, 0)), sigma_n = std::sqrt(c(1, 1));
+      corrections.east_sigma_m.push_back(sigma_e);
+      corrections.north_sigma_m.push_back(sigma_n);
+      corrections.east_north_correlation.push_back(c(0, 1) / (sigma_e * sigma_n));
+    }
   }
   if (corrections.stamps.empty()) return;
   corrections.header.stamp = corrections.stamps.back();
@@ -1227,6 +1238,15 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
       status.addf("graph last solve", "%.3f s CPU, %s", snapshot->report.cpu_s,
                   snapshot->report.converged ? "converged" : "bounded");
       if (!snapshot->last_error.empty()) status.add("graph last error", snapshot->last_error);
+      if (!snapshot->position_covariance_m2.empty()) {
+        // The latest key frame the marginals cover: how well the graph knows where the vehicle was lately.
+        for (auto c = snapshot->position_covariance_m2.rbegin(); c != snapshot->position_covariance_m2.rend(); ++c)
+          if (c->allFinite()) {
+            status.addf("graph position 1-sigma (m)", "%.3f E, %.3f N (%.3f s CPU)", std::sqrt((*c)(0, 0)),
+                        std::sqrt((*c)(1, 1)), snapshot->marginals_cpu_s);
+            break;
+          }
+      }
       int accepted = 0;
       for (char a : snapshot->loop_accepted) accepted += a;
       status.add("graph loops accepted", accepted);

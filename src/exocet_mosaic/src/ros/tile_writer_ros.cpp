@@ -766,10 +766,20 @@ void TileWriterRos::onCorrections(const exocet_msgs::PositionCorrectionsConstPtr
     stamps.push_back(msg->stamps[i].toSec());
     values.emplace_back(msg->east_m[i], msg->north_m[i]);
   }
+  std::map<double, std::array<double, 3>> sigmas;
+  if (msg->east_sigma_m.size() == n && msg->north_sigma_m.size() == n && msg->east_north_correlation.size() == n) {
+    for (std::size_t i = 0; i < n; ++i)
+      if (std::isfinite(msg->east_sigma_m[i]) && std::isfinite(msg->north_sigma_m[i]))
+        sigmas[stamps[i]] = {msg->east_sigma_m[i], msg->north_sigma_m[i], msg->east_north_correlation[i]};
+  } else if (!msg->east_sigma_m.empty()) {
+    ROS_WARN_THROTTLE(30.0, "tile writer: graph corrections whose 1-sigma arrays differ in length from the stamps: "
+                            "the sigmas are ignored");
+  }
   int left_out = 0;
   {
     std::lock_guard<std::mutex> lock(corrections_mutex_);
     left_out = corrections_.set(stamps, values);
+    correction_sigmas_ = std::move(sigmas);
     ++corrections_received_;
   }
   if (left_out > 0)
@@ -1237,16 +1247,26 @@ int TileWriterRos::adjustWrittenTiles() {
 
 void TileWriterRos::saveCorrections() {
   if (images_dir_.empty()) return;
-  std::string text = "stamp_s,east_m,north_m\n";
+  // The graph's 1-sigma in the last columns, empty where it has none: readPositionCorrections reads the first three.
+  std::string text = "stamp_s,east_m,north_m,east_sigma_m,north_sigma_m,east_north_correlation\n";
   {
     std::lock_guard<std::mutex> lock(corrections_mutex_);
     if (corrections_.empty() || corrections_saved_ == corrections_received_) return;
     corrections_saved_ = corrections_received_;
-    char line[96];
+    char line[160];
     for (std::size_t i = 0; i < corrections_.size(); ++i) {
-      std::snprintf(line, sizeof(line), "%.6f,%.6f,%.6f\n", corrections_.stamps()[i], corrections_.corrections()[i].x(),
-                    corrections_.corrections()[i].y());
-      text += line;
+      const double stamp_s = corrections_.stamps()[i];
+      const int length = std::snprintf(line, sizeof(line), "%.6f,%.6f,%.6f", stamp_s,
+                                       corrections_.corrections()[i].x(), corrections_.corrections()[i].y());
+      text.append(line, length);
+      const auto sigma = correction_sigmas_.find(stamp_s);
+      if (sigma != correction_sigmas_.end()) {
+        const int more = std::snprintf(line, sizeof(line), ",%.6f,%.6f,%.4f\n", sigma->second[0], sigma->second[1],
+                                       sigma->second[2]);
+        text.append(line, more);
+      } else {
+        text += ",,,\n";
+      }
     }
   }
   try {

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -38,6 +39,11 @@ struct GraphSnapshot {
   std::vector<char> loop_accepted;       ///< per loop index
   SolveReport report;                    ///< of the solve that made this snapshot
   std::string last_error;                ///< the last input the worker could not apply ("" normally)
+  /// Marginal covariance of (E, N) of each key frame of key_frames (m^2), from the last marginals computed (on a
+  /// settled graph, PoseGraph::positionCovariances()); NaN for key frames added since; empty when none computed yet.
+  std::vector<Eigen::Matrix2d> position_covariance_m2;
+  uint64_t marginals_sequence = 0;  ///< the snapshot whose solution they are of (0: none yet)
+  double marginals_cpu_s = 0.0;     ///< CPU seconds the last computation of the marginals took
   /// The key frame `id`, nullptr when not in the snapshot.
   const KeyFramePose* find(int64_t id) const;
 };
@@ -46,6 +52,13 @@ struct BackgroundPoseGraphConfig {
   PoseGraphConfig graph;
   double idle_wait_s = 0.05;           ///< longest sleep of the worker between checks, seconds, > 0
   bool settle_with_full_solve = true;  ///< full solve when the queue runs dry after windowed solves
+  /// The marginals of the key frames' positions are computed after a settling solve when the queue is empty, at most
+  /// this fraction of the time (a computation of c seconds waits c / fraction after the previous one), [0, 1]; 0:
+  /// never. Not interruptible: new input waits for a computation under way.
+  double marginals_duty_cycle = 0.1;
+  /// Key frames whose marginals are computed, the others interpolated (PoseGraph::positionCovariances), [2, 1e6]:
+  /// bounds a computation at about a second of CPU on an hour-long dive (9000 key frames).
+  int marginals_max_key_frames = 500;
   std::string validate() const;        ///< "" or each bad field with its allowed range
 };
 
@@ -120,6 +133,8 @@ class BackgroundPoseGraph {
   bool knownId(int64_t id) const;  ///< under mutex_
   void run();
   void publish(const SolveReport& report, bool settled);
+  bool marginalsDue() const;  ///< worker
+  void computeMarginals();    ///< worker
 
   const BackgroundPoseGraphConfig config_;
   SnapshotCallback on_snapshot_;
@@ -142,6 +157,14 @@ class BackgroundPoseGraph {
   uint64_t sequence_ = 0;                          ///< the worker's
   uint64_t applied_ = 0;                           ///< the worker's
   std::string last_error_;                         ///< the worker's
+  // The worker's: the last marginals, for the key frames `marginals_ids_` of the snapshot `marginals_sequence_`.
+  SolveReport last_report_;  ///< of the last solve, for the snapshot that carries new marginals
+  std::vector<int64_t> marginals_ids_;
+  std::vector<Eigen::Matrix2d> marginals_m2_;
+  uint64_t marginals_sequence_ = 0;
+  double marginals_cpu_s_ = 0.0;
+  bool settled_since_marginals_ = false;  ///< a settled solution the marginals are not of
+  std::chrono::steady_clock::time_point next_marginals_{};
   std::thread worker_;
 };
 

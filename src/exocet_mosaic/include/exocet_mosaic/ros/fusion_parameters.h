@@ -84,6 +84,9 @@ struct FusionNodeConfig {
   /// With pose_graph: exocet_msgs/PositionCorrections after each solve (graph pose - the filter's position at every
   /// key frame), for a tile writer that draws its tiles again where the graph moved their images.
   std::string graph_corrections_topic = "/mosaic/graph_corrections";
+  /// With pose_graph: the share of the graph worker's time spent on the key frames' position marginals (the 1-sigma
+  /// sent with the corrections), [0, 1]; 0: none computed (graph::BackgroundPoseGraphConfig::marginals_duty_cycle).
+  double graph_marginals_duty_cycle = 0.1;
   /// With pose_graph: look for loops live (graph::LoopCloser: the key frames' images from loop_image_topic, the
   /// candidates whose footprints may overlap, verified by registration, added to the graph in a worker thread).
   bool loop_closure = false;

@@ -233,6 +233,9 @@ class TileWriterRos {
   std::string images_dir_;  ///< <output_dir>/.exocet_images (keep_images)
   std::mutex corrections_mutex_;
   tiles::PositionCorrectionTrack corrections_;
+  /// The graph's 1-sigma with the latest corrections: key frame stamp (s) -> (east m, north m, correlation); saved
+  /// beside the corrections for the checks made after the dive (corrections_mutex_).
+  std::map<double, std::array<double, 3>> correction_sigmas_;
   std::int64_t corrections_received_ = 0, corrections_saved_ = 0;
   std::map<int, Eigen::Vector2d> used_corrections_;  ///< frame index -> correction added to its pose (compose thread)
   std::map<int, tiles::TileRecord> records_;         ///< written tiles by index (write_mutex_)
