@@ -128,8 +128,11 @@ TEST(PoseGraph, TwoFixesMatchDenseLeastSquares) {
     EXPECT_NEAR(p.position_en_m.y(), 0.0, 1e-6) << "key frame " << k;
     EXPECT_NEAR(p.yaw_rad, 0.0, 1e-6) << "key frame " << k;
   }
-  // East is decoupled from north and yaw at this solution: its marginal variance is that of the linear system.
-  const Eigen::Matrix3d inverse = normal.inverse();
+  // East is decoupled from north and yaw at this solution: its marginal variance is that of the linear system, with
+  // the weak prior the marginals put on every key frame (a direction nothing constrains has a 1-sigma).
+  const Eigen::Matrix3d normal_with_priors =
+      normal + Eigen::Matrix3d::Identity() / (config.gauge_sigma_m * config.gauge_sigma_m);
+  const Eigen::Matrix3d inverse = normal_with_priors.inverse();
   for (int k = 0; k < 3; ++k) {
     const std::optional<Eigen::Matrix3d> c = g.covariance(k);
     ASSERT_TRUE(c.has_value());
@@ -209,6 +212,20 @@ TEST(PoseGraph, PositionCovariancesWithACapInterpolateBetweenComputedKeyFrames) 
   EXPECT_GT(max_relative, 0.0) << "nothing was interpolated";
   EXPECT_LT(max_relative, 0.25);
   EXPECT_EQ(g.positionCovariances(1000).size(), static_cast<size_t>(n));
+}
+
+// One fix and no heading leave the graph free to turn about the fix: the marginals still exist (the weak priors'),
+// small at the fix and as large as that turn makes them at the far end.
+TEST(PoseGraph, PositionCovariancesOfAGraphFreeToTurnAboutItsFix) {
+  const OutAndBack run;
+  PoseGraph g;
+  run.fill(&g, false);
+  EXPECT_TRUE(g.addPositionFix(0.0, run.truth[0].position_en_m, diag2(0.05)));
+  ASSERT_TRUE(g.solveFull().converged);
+  const std::vector<Eigen::Matrix2d> marginals = g.positionCovariances();
+  ASSERT_EQ(marginals.size(), run.truth.size());
+  EXPECT_LT(std::sqrt(marginals.front().trace()), 0.1);
+  EXPECT_GT(std::sqrt(marginals[40].trace()), 10.0) << "40 m from the fix, turning freely (3 rad prior)";
 }
 
 // A false loop 1 m off with a 5 mm 1-sigma is switched off and does not bend the map; the true loops in the same

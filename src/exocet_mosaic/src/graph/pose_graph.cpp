@@ -619,6 +619,18 @@ LoopStatus PoseGraph::loop(int index) const {
   return status;
 }
 
+void PoseGraph::buildCovarianceProblem(ceres::Problem* problem,
+                                       std::vector<std::unique_ptr<ceres::CostFunction>>* priors) {
+  int held = 0;
+  buildProblem(std::vector<char>(keyframes_.size(), 1), false, problem, &held);
+  priors->reserve(keyframes_.size());
+  for (KeyFrame& k : keyframes_) {
+    priors->emplace_back(new ceres::AutoDiffCostFunction<PriorResidual, 3, 3>(new PriorResidual{
+        Eigen::Vector3d(k.state[0], k.state[1], k.state[2]), config_.gauge_sigma_m, config_.gauge_sigma_rad}));
+    problem->AddResidualBlock(priors->back().get(), nullptr, k.state);
+  }
+}
+
 std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
   const int index = requireIndex(id, "covariance");
   // Ceres reads the parameter blocks without changing them; buildProblem's bookkeeping is scratch.
@@ -627,8 +639,8 @@ std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
-  int held = 0;
-  self.buildProblem(std::vector<char>(keyframes_.size(), 1), false, &problem, &held);
+  std::vector<std::unique_ptr<ceres::CostFunction>> priors;
+  self.buildCovarianceProblem(&problem, &priors);
   double* block = self.keyframes_[index].state;
   if (!problem.HasParameterBlock(block)) return std::nullopt;
   ceres::Covariance::Options options;
@@ -656,8 +668,8 @@ std::vector<Eigen::Matrix2d> PoseGraph::positionCovariances(int max_computed) co
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
-  int held = 0;
-  self.buildProblem(std::vector<char>(keyframes_.size(), 1), false, &problem, &held);
+  std::vector<std::unique_ptr<ceres::CostFunction>> priors;
+  self.buildCovarianceProblem(&problem, &priors);
   std::vector<std::pair<const double*, const double*>> blocks;
   blocks.reserve(computed.size());
   for (const int i : computed) {

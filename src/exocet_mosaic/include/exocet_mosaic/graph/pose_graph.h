@@ -231,14 +231,16 @@ class PoseGraph {
 
   /**
    * @brief The 3x3 marginal covariance of (E m, N m, yaw rad) of key frame `id` at the current estimate, the loop
-   * switches taken as known (ceres::Covariance over the whole graph: expensive on a long dive, opt-in).
+   * switches taken as known and a weak prior on every key frame (buildCovarianceProblem; ceres::Covariance over the
+   * whole graph: expensive on a long dive, opt-in).
    * @return std::nullopt when Ceres cannot compute it (rank-deficient problem)
    */
   std::optional<Eigen::Matrix3d> covariance(int64_t id) const;
 
   /**
    * @brief The 2x2 marginal covariance of (E m, N m) of every key frame, in increasing id order, at the current
-   * estimate, the loop switches taken as known: one ceres::Covariance over the whole graph.
+   * estimate, the loop switches taken as known and a weak prior on every key frame (a direction nothing constrains
+   * has the prior's 1-sigma, not none): one ceres::Covariance over the whole graph.
    *
    * Its cost grows with the key frames asked for times the size of the factorisation (bench_pose_graph: 0.13 s of
    * CPU for 1000 key frames, 10 s for 9000). With `max_computed` > 0 at most that many are computed, evenly spread
@@ -304,6 +306,11 @@ class PoseGraph {
   void testNewLoops(const std::vector<char>& active, SolveReport* report);
   /// Adds the factors touching `active` key frames to `problem`; returns how many.
   int buildProblem(const std::vector<char>& active, bool switches_free, ceres::Problem* problem, int* held);
+  /// The whole graph for ceres::Covariance, with a weak prior (the gauge's sigmas) on every key frame at its estimate:
+  /// Ceres needs a full-rank Jacobian, and a direction nothing constrains (a graph that one fix and no heading leave
+  /// free to turn) then has the prior's 1-sigma instead of none. Against centimetre factors it changes a marginal by
+  /// about 1e-5 of itself. `priors` owns the priors' cost functions.
+  void buildCovarianceProblem(ceres::Problem* problem, std::vector<std::unique_ptr<ceres::CostFunction>>* priors);
 
   PoseGraphConfig config_;
   std::unique_ptr<ceres::LossFunction> fix_loss_;
