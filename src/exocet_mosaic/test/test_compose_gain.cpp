@@ -3,7 +3,12 @@
 // their common pixels.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <filesystem>
+#include <optional>
+#include <string>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -201,6 +206,64 @@ TEST(TileGainCompensator, MatchesOverlappingPassesRobustly) {
   compensate(&least_squares, scene.raw, &plain_gains);
   std::printf("[ least squares ] C gain %.4f (truth %.4f)\n", plain_gains[2].gain[1], 1.0 / 1.3);
   EXPECT_GT(std::abs(plain_gains[2].gain[1] * 1.3 - 1.0), 0.04);
+}
+
+// With a folder for the cells, the records beyond the few kept in memory are written out and read back when a new
+// tile overlaps them: the same gains and ramps as all in memory, memory bounded, every failure counted, none fatal.
+TEST(TileGainCompensator, CellsWrittenOutGiveTheSameGainsInBoundedMemory) {
+  const Scene scene;
+  ec::TileGainCompensator in_memory;
+  std::vector<ec::TileGains> expected;
+  compensate(&in_memory, scene.raw, &expected);
+
+  const std::filesystem::path folder =
+      std::filesystem::temp_directory_path() / ("exocet_tile_cells_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(folder);
+  std::filesystem::create_directories(folder);
+  ec::TileGainConfig config;
+  config.cells_folder = folder.string();
+  config.cells_in_memory_tiles = 1;
+  ec::TileGainCompensator spilled(config);
+  std::vector<ec::TileGains> gains;
+  compensate(&spilled, scene.raw, &gains);
+  ASSERT_EQ(gains.size(), expected.size());
+  for (std::size_t i = 0; i < gains.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(gains[i].gain[k], expected[i].gain[k]) << "tile " << i << " channel " << k;
+      EXPECT_EQ(gains[i].far_gain[k], expected[i].far_gain[k]) << "tile " << i << " channel " << k;
+    }
+  EXPECT_EQ(spilled.tileCount(), in_memory.tileCount());
+  EXPECT_EQ(spilled.spilledCount(), spilled.tileCount() - 1);
+  EXPECT_LT(spilled.memoryBytes(), in_memory.memoryBytes());
+  EXPECT_EQ(spilled.spillFailures(), 0);
+  EXPECT_EQ(spilled.readFailures(), 0);
+  // A written-out tile's gains come back with its ramp.
+  const std::optional<ec::TileGains> back = spilled.gainsOf(1), kept = in_memory.gainsOf(1);
+  ASSERT_TRUE(back && kept);
+  ASSERT_EQ(back->ramp.size(), kept->ramp.size());
+  EXPECT_EQ(cv::norm(back->ramp, kept->ramp, cv::NORM_INF), 0.0);
+
+  // A file that does not read back: counted, that overlap left out, no throw.
+  const std::string first = (folder / "tile_cells_0.bin").string();
+  ASSERT_TRUE(std::filesystem::exists(first));
+  std::filesystem::resize_file(first, 20);
+  EXPECT_NO_THROW(spilled.estimate(scene.raw[1], -1));
+  EXPECT_GE(spilled.readFailures(), 1);
+  // Forgetting a tile removes its file; clear() the others.
+  EXPECT_TRUE(spilled.forget(0));
+  EXPECT_FALSE(std::filesystem::exists(first));
+  spilled.clear();
+  EXPECT_TRUE(std::filesystem::is_empty(folder));
+
+  // A folder that cannot be written (gone): the records stay in memory, counted, the gains unchanged.
+  config.cells_folder = (folder / "missing").string();
+  ec::TileGainCompensator unwritable(config);
+  std::vector<ec::TileGains> kept_gains;
+  compensate(&unwritable, scene.raw, &kept_gains);
+  EXPECT_GE(unwritable.spillFailures(), 1);
+  EXPECT_EQ(unwritable.spilledCount(), 0u);
+  for (std::size_t i = 0; i < kept_gains.size(); ++i) EXPECT_EQ(kept_gains[i].gain[1], expected[i].gain[1]);
+  std::filesystem::remove_all(folder);
 }
 
 TEST(TileGainCompensator, UniformGainKeepsPartOfTheStep) {

@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
 
+#include "exocet_common/atomic_file.h"
 #include "tile_cells.h"
 
 namespace exocet_mosaic {
@@ -28,6 +31,8 @@ std::string TileGainConfig::validate() const {
   check(max_gain >= 1.0 && max_gain <= 10.0, "max_gain", "in [1, 10]", max_gain);
   check(huber_k >= 0.5 && huber_k <= 100.0, "huber_k", "in [0.5, 100]", huber_k);
   check(seam_ramp_cells >= 0.0 && seam_ramp_cells <= 1000.0, "seam_ramp_cells", "in [0, 1000]", seam_ramp_cells);
+  check(cells_in_memory_tiles >= 1 && cells_in_memory_tiles <= 100000, "cells_in_memory_tiles", "in [1, 100000]",
+        cells_in_memory_tiles);
   std::string joined;
   for (const auto& b : bad) joined += (joined.empty() ? "" : "; ") + b;
   return joined;
@@ -109,17 +114,22 @@ TileGains TileGainCompensator::estimate(const tiles::TileRaster& raster, int til
   cv::Mat ref_sum(cells.mean.size(), CV_32FC(channels), cv::Scalar::all(0));
   cv::Mat ref_cov(cells.mean.size(), CV_32F, cv::Scalar::all(0));
   for (const auto& [index, record] : records_) {
-    if (index == tile_index || record.cells.empty() || record.cells.channels() != channels + 1) continue;
+    if (index == tile_index || record.cell_rows == 0 || record.cell_channels != channels + 1) continue;
     // Record cell (row, col) is cell row record.north - row, column record.west + col.
     const std::int64_t row_shift = cells.north - record.cell_north;  // new row = record row + row_shift
     const std::int64_t col_shift = record.cell_west - cells.west;    // new col = record col + col_shift
     const std::int64_t r0 = std::max<std::int64_t>(0, -row_shift);
-    const std::int64_t r1 = std::min<std::int64_t>(record.cells.rows, cells.mean.rows - row_shift);
+    const std::int64_t r1 = std::min<std::int64_t>(record.cell_rows, cells.mean.rows - row_shift);
     const std::int64_t c0 = std::max<std::int64_t>(0, -col_shift);
-    const std::int64_t c1 = std::min<std::int64_t>(record.cells.cols, cells.mean.cols - col_shift);
+    const std::int64_t c1 = std::min<std::int64_t>(record.cell_cols, cells.mean.cols - col_shift);
     if (r0 >= r1 || c0 >= c1) continue;
+    cv::Mat packed = record.cells;
+    if (!record.file.empty()) {
+      cv::Mat ramp;
+      if (!readBack(record, &packed, &ramp)) continue;  // counted: this tile's overlap is left out
+    }
     TileCells written;
-    unpackTileCells(record.cells, &written);
+    unpackTileCells(packed, &written);
     for (std::int64_t r = r0; r < r1; ++r)
       for (std::int64_t c = c0; c < c1; ++c) {
         const float cov = written.coverage.at<float>(r, c);
@@ -254,19 +264,119 @@ void TileGainCompensator::record(int tile_index, const tiles::TileRaster& correc
     record.cell_west = cells.west;
     record.cell_north = cells.north;
     record.cells = packTileCells(cells);
+    record.cell_rows = record.cells.rows;
+    record.cell_cols = record.cells.cols;
+    record.cell_channels = record.cells.channels();
   }
+  const auto old = records_.find(tile_index);
+  if (old != records_.end()) removeFile(old->second);  // a new version: the old cells go
   records_[tile_index] = std::move(record);
+  spillBeyondLimit();
 }
 
 std::optional<TileGains> TileGainCompensator::gainsOf(int tile_index) const {
   const auto it = records_.find(tile_index);
   if (it == records_.end()) return std::nullopt;
-  return it->second.gains;
+  TileGains gains = it->second.gains;
+  if (!it->second.file.empty()) {
+    cv::Mat cells;
+    readBack(it->second, &cells, &gains.ramp);  // without its ramp (counted) the tile takes its far gains
+  }
+  return gains;
 }
 
-bool TileGainCompensator::forget(int tile_index) { return records_.erase(tile_index) > 0; }
+// Written out: "EXTG" and a version, then the cells and the ramp, each rows, cols, type and bytes.
+namespace {
+constexpr std::uint32_t kCellsMagic = 0x47545845;  // "EXTG"
+constexpr std::uint32_t kCellsVersion = 1;
+
+void putMat(std::string* out, const cv::Mat& m) {
+  const std::int32_t header[3] = {m.rows, m.cols, m.type()};
+  out->append(reinterpret_cast<const char*>(header), sizeof(header));
+  const cv::Mat c = m.isContinuous() ? m : m.clone();
+  if (!c.empty()) out->append(reinterpret_cast<const char*>(c.data), c.total() * c.elemSize());
+}
+
+bool getMat(std::istream& in, cv::Mat* m) {
+  std::int32_t header[3];
+  if (!in.read(reinterpret_cast<char*>(header), sizeof(header))) return false;
+  if (header[0] < 0 || header[1] < 0 || header[0] > 1000000 || header[1] > 1000000) return false;
+  if (header[0] == 0 || header[1] == 0) {
+    *m = cv::Mat();
+    return true;
+  }
+  m->create(header[0], header[1], header[2]);
+  return bool(in.read(reinterpret_cast<char*>(m->data), static_cast<std::streamsize>(m->total() * m->elemSize())));
+}
+}  // namespace
+
+void TileGainCompensator::spillBeyondLimit() {
+  if (config_.cells_folder.empty()) return;
+  std::vector<std::pair<std::uint64_t, int>> in_memory;  // (sequence, index)
+  for (const auto& [index, record] : records_)
+    if (record.file.empty() && (!record.cells.empty() || !record.gains.ramp.empty()))
+      in_memory.emplace_back(record.sequence, index);
+  if (in_memory.size() <= static_cast<std::size_t>(config_.cells_in_memory_tiles)) return;
+  std::sort(in_memory.begin(), in_memory.end());
+  const std::size_t excess = in_memory.size() - static_cast<std::size_t>(config_.cells_in_memory_tiles);
+  for (std::size_t i = 0; i < excess; ++i) {
+    Record& record = records_.at(in_memory[i].second);
+    const std::string path = config_.cells_folder + "/tile_cells_" + std::to_string(in_memory[i].second) + ".bin";
+    std::string bytes;
+    bytes.append(reinterpret_cast<const char*>(&kCellsMagic), sizeof(kCellsMagic));
+    bytes.append(reinterpret_cast<const char*>(&kCellsVersion), sizeof(kCellsVersion));
+    putMat(&bytes, record.cells);
+    putMat(&bytes, record.gains.ramp);
+    try {
+      exocet_common::writeFileAtomically(path, bytes);
+    } catch (const std::exception&) {
+      ++spill_failures_;  // kept in memory: nothing is lost, memory grows (a full disk, a missing folder)
+      continue;
+    }
+    record.file = path;
+    record.cells.release();
+    record.gains.ramp.release();
+  }
+}
+
+bool TileGainCompensator::readBack(const Record& record, cv::Mat* cells, cv::Mat* ramp) const {
+  std::ifstream in(record.file, std::ios::binary);
+  std::uint32_t magic = 0, version = 0;
+  cv::Mat c, r;
+  const bool ok = in.read(reinterpret_cast<char*>(&magic), sizeof(magic)) &&
+                  in.read(reinterpret_cast<char*>(&version), sizeof(version)) && magic == kCellsMagic &&
+                  version == kCellsVersion && getMat(in, &c) && getMat(in, &r) && c.rows == record.cell_rows &&
+                  c.cols == record.cell_cols && (c.empty() || c.channels() == record.cell_channels);
+  if (!ok) {
+    ++read_failures_;
+    return false;
+  }
+  *cells = c;
+  *ramp = r;
+  return true;
+}
+
+void TileGainCompensator::removeFile(const Record& record) const {
+  if (record.file.empty()) return;
+  std::error_code ignored;
+  std::filesystem::remove(record.file, ignored);
+}
+
+std::size_t TileGainCompensator::spilledCount() const {
+  return static_cast<std::size_t>(
+      std::count_if(records_.begin(), records_.end(), [](const auto& r) { return !r.second.file.empty(); }));
+}
+
+bool TileGainCompensator::forget(int tile_index) {
+  const auto it = records_.find(tile_index);
+  if (it == records_.end()) return false;
+  removeFile(it->second);
+  records_.erase(it);
+  return true;
+}
 
 void TileGainCompensator::clear() {
+  for (const auto& [index, record] : records_) removeFile(record);
   records_.clear();
   cell_size_m_ = 0.0;
   frame_.clear();

@@ -63,6 +63,10 @@ TileWriterRos::TileWriterRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     std::error_code error;
     std::filesystem::create_directories(images_dir_, error);
     if (error) ROS_ERROR("tile writer: cannot create %s: %s", images_dir_.c_str(), error.message().c_str());
+    // The tile gains' cells of the older tiles go beside the kept images: their memory does not grow with the dive.
+    compose::TileGainConfig gain_config = gains_.config();
+    gain_config.cells_folder = images_dir_;
+    gains_ = compose::TileGainCompensator(gain_config);
   }
   const int stale =
       writer_->removeStaleTemporaries() + (images_dir_.empty() ? 0 : tiles::removeTemporariesIn(images_dir_));

@@ -48,6 +48,11 @@ struct TileGainConfig {
   /// and the gain eases (raised cosine) to the prior-pulled gain over this distance from them. 0: one uniform
   /// gain, the prior-pulled one, over the whole tile (its seam keeps prior_weight / (1 + prior_weight) of the step).
   double seam_ramp_cells = 12.0;
+  /// Folder where the records beyond cells_in_memory_tiles (the least recently recorded) are written out, their cells
+  /// and ramp read back when a new tile overlaps them or their gains are asked for: memory does not grow with the
+  /// dive. Empty: every record stays in memory. A record that cannot be written stays in memory (spillFailures()).
+  std::string cells_folder;
+  int cells_in_memory_tiles = 16;  ///< records whose cells stay in memory with cells_folder, [1, 100000]
 
   /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
   std::string validate() const;
@@ -83,8 +88,9 @@ struct TileGains {
  * @brief Live gain compensation between tiles. Keeps per recorded tile (by index) its cells' corrected mean levels
  * and coverage (uint16 each) and its gains with their seam ramp (1 byte per cell): 2 x (channels + 1) + 1 bytes per
  * cell over the bounding box of the tile's data, e.g. 9 KB for a 512 x 512 px BGR tile with 16 px cells, 37 KB for
- * 1024 x 1024 (memoryBytes()): memory grows by that per tile, never with pixels. Not thread-safe: call it from one
- * thread (the tile writer's).
+ * 1024 x 1024, 210 KB for a 3500 x 1700 px PAL tile (memoryBytes()): memory grows by that per tile, never with
+ * pixels, unless TileGainConfig::cells_folder takes the older records out of memory. Not thread-safe: call it from
+ * one thread (the tile writer's).
  *
  * All tiles must share one frame (UTM zone and hemisphere, or local frame): tiles of another frame than the first
  * one seen, or of another channel count, have no overlap with the records.
@@ -124,8 +130,14 @@ class TileGainCompensator {
   void clear();
 
   std::size_t tileCount() const { return records_.size(); }
-  /// Bytes held by the records (cells and ramps).
+  /// Bytes held in memory by the records (cells and ramps; not those written out).
   std::size_t memoryBytes() const;
+  /// Records whose cells and ramp are written out to config().cells_folder.
+  std::size_t spilledCount() const;
+  /// Records that could not be written out (kept in memory), and written-out records that could not be read back
+  /// (left out of that estimate, or their gains without a ramp).
+  std::int64_t spillFailures() const { return spill_failures_; }
+  std::int64_t readFailures() const { return read_failures_; }
   /// Side of the cells (m), 0 before the first tile.
   double cellSizeM() const { return cell_size_m_; }
 
@@ -135,13 +147,22 @@ class TileGainCompensator {
     cv::Mat cells;                               // CV_16UC(channels + 1): mean * 256 per channel, then coverage * 65535
     TileGains gains;
     std::uint64_t sequence = 0;  // order of recording, for the no-overlap guess
+    int cell_rows = 0, cell_cols = 0, cell_channels = 0;  // of cells, also when written out
+    std::string file;  // where cells and gains.ramp are written out (both empty in memory then); empty: in memory
   };
+  /// Writes the oldest records in memory out until at most cells_in_memory_tiles remain (with cells_folder).
+  void spillBeyondLimit();
+  /// Reads a written-out record's cells and ramp; false (counted) if the file does not read back.
+  bool readBack(const Record& record, cv::Mat* cells, cv::Mat* ramp) const;
+  void removeFile(const Record& record) const;
 
   TileGainConfig config_;
   double cell_size_m_ = 0.0;  // fixed by the first record
   std::string frame_;         // of the first record: tiles of another frame have no overlap
   std::map<int, Record> records_;
   std::uint64_t next_sequence_ = 0;
+  std::int64_t spill_failures_ = 0;
+  mutable std::int64_t read_failures_ = 0;
 };
 
 }  // namespace compose
