@@ -619,38 +619,46 @@ LoopStatus PoseGraph::loop(int index) const {
   return status;
 }
 
-void PoseGraph::buildCovarianceProblem(ceres::Problem* problem,
-                                       std::vector<std::unique_ptr<ceres::CostFunction>>* priors) {
-  int held = 0;
-  buildProblem(std::vector<char>(keyframes_.size(), 1), false, problem, &held);
-  priors->reserve(keyframes_.size());
-  for (KeyFrame& k : keyframes_) {
-    priors->emplace_back(new ceres::AutoDiffCostFunction<PriorResidual, 3, 3>(new PriorResidual{
-        Eigen::Vector3d(k.state[0], k.state[1], k.state[2]), config_.gauge_sigma_m, config_.gauge_sigma_rad}));
-    problem->AddResidualBlock(priors->back().get(), nullptr, k.state);
-  }
-}
-
-std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
-  const int index = requireIndex(id, "covariance");
+std::optional<std::vector<Eigen::Matrix3d>> PoseGraph::covarianceBlocks(const std::vector<int>& indices) const {
   // Ceres reads the parameter blocks without changing them; buildProblem's bookkeeping is scratch.
   PoseGraph& self = const_cast<PoseGraph&>(*this);
   ceres::Problem::Options problem_options;
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
+  int held = 0;
+  self.buildProblem(std::vector<char>(keyframes_.size(), 1), false, &problem, &held);
+  // Ceres needs a full-rank Jacobian: a weak prior (the gauge's sigmas) on every key frame at its estimate.
   std::vector<std::unique_ptr<ceres::CostFunction>> priors;
-  self.buildCovarianceProblem(&problem, &priors);
-  double* block = self.keyframes_[index].state;
-  if (!problem.HasParameterBlock(block)) return std::nullopt;
+  priors.reserve(keyframes_.size());
+  for (KeyFrame& k : self.keyframes_) {
+    priors.emplace_back(new ceres::AutoDiffCostFunction<PriorResidual, 3, 3>(new PriorResidual{
+        Eigen::Vector3d(k.state[0], k.state[1], k.state[2]), config_.gauge_sigma_m, config_.gauge_sigma_rad}));
+    problem.AddResidualBlock(priors.back().get(), nullptr, k.state);
+  }
+  std::vector<std::pair<const double*, const double*>> blocks;
+  blocks.reserve(indices.size());
+  for (const int i : indices) blocks.emplace_back(self.keyframes_[i].state, self.keyframes_[i].state);
   ceres::Covariance::Options options;
   options.sparse_linear_algebra_library_type =
       ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE : ceres::EIGEN_SPARSE;
+  options.num_threads = 1;  // a background task: it must not take the chain's cores
   ceres::Covariance covariance(options);
-  if (!covariance.Compute({std::make_pair(block, block)}, &problem)) return std::nullopt;
+  if (!covariance.Compute(blocks, &problem)) return std::nullopt;
+  std::vector<Eigen::Matrix3d> out;
+  out.reserve(blocks.size());
   Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c;
-  if (!covariance.GetCovarianceBlock(block, block, c.data())) return std::nullopt;
-  return Eigen::Matrix3d(c);
+  for (const auto& block : blocks) {
+    if (!covariance.GetCovarianceBlock(block.first, block.second, c.data())) return std::nullopt;
+    out.emplace_back(c);
+  }
+  return out;
+}
+
+std::optional<Eigen::Matrix3d> PoseGraph::covariance(int64_t id) const {
+  const std::optional<std::vector<Eigen::Matrix3d>> blocks = covarianceBlocks({requireIndex(id, "covariance")});
+  if (!blocks) return std::nullopt;
+  return blocks->front();
 }
 
 std::vector<Eigen::Matrix2d> PoseGraph::positionCovariances(int max_computed) const {
@@ -662,34 +670,11 @@ std::vector<Eigen::Matrix2d> PoseGraph::positionCovariances(int max_computed) co
   std::vector<int> computed;
   for (int i = 0; i < n; i += stride) computed.push_back(i);
   if (computed.back() != n - 1) computed.push_back(n - 1);
-
-  PoseGraph& self = const_cast<PoseGraph&>(*this);  // as covariance(): the blocks are read, not changed
-  ceres::Problem::Options problem_options;
-  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
-  std::vector<std::unique_ptr<ceres::CostFunction>> priors;
-  self.buildCovarianceProblem(&problem, &priors);
-  std::vector<std::pair<const double*, const double*>> blocks;
-  blocks.reserve(computed.size());
-  for (const int i : computed) {
-    double* state = self.keyframes_[i].state;
-    if (!problem.HasParameterBlock(state)) return {};
-    blocks.emplace_back(state, state);
-  }
-  ceres::Covariance::Options options;
-  options.sparse_linear_algebra_library_type =
-      ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ? ceres::SUITE_SPARSE : ceres::EIGEN_SPARSE;
-  options.num_threads = 1;  // a background task: it must not take the chain's cores
-  ceres::Covariance covariance(options);
-  if (!covariance.Compute(blocks, &problem)) return {};
+  const std::optional<std::vector<Eigen::Matrix3d>> blocks = covarianceBlocks(computed);
+  if (!blocks) return {};
   std::vector<Eigen::Matrix2d> at_computed;
-  at_computed.reserve(blocks.size());
-  Eigen::Matrix<double, 3, 3, Eigen::RowMajor> c;
-  for (const auto& block : blocks) {
-    if (!covariance.GetCovarianceBlock(block.first, block.second, c.data())) return {};
-    at_computed.push_back(c.topLeftCorner<2, 2>());
-  }
+  at_computed.reserve(blocks->size());
+  for (const Eigen::Matrix3d& c : *blocks) at_computed.push_back(c.topLeftCorner<2, 2>());
   std::vector<Eigen::Matrix2d> out(n);
   for (size_t j = 0; j < computed.size(); ++j) {
     out[computed[j]] = at_computed[j];

@@ -231,7 +231,7 @@ class PoseGraph {
 
   /**
    * @brief The 3x3 marginal covariance of (E m, N m, yaw rad) of key frame `id` at the current estimate, the loop
-   * switches taken as known and a weak prior on every key frame (buildCovarianceProblem; ceres::Covariance over the
+   * switches taken as known and a weak prior on every key frame (covarianceBlocks; ceres::Covariance over the
    * whole graph: expensive on a long dive, opt-in).
    * @return std::nullopt when Ceres cannot compute it (rank-deficient problem)
    */
@@ -306,11 +306,12 @@ class PoseGraph {
   void testNewLoops(const std::vector<char>& active, SolveReport* report);
   /// Adds the factors touching `active` key frames to `problem`; returns how many.
   int buildProblem(const std::vector<char>& active, bool switches_free, ceres::Problem* problem, int* held);
-  /// The whole graph for ceres::Covariance, with a weak prior (the gauge's sigmas) on every key frame at its estimate:
-  /// Ceres needs a full-rank Jacobian, and a direction nothing constrains (a graph that one fix and no heading leave
-  /// free to turn) then has the prior's 1-sigma instead of none. Against centimetre factors it changes a marginal by
-  /// about 1e-5 of itself. `priors` owns the priors' cost functions.
-  void buildCovarianceProblem(ceres::Problem* problem, std::vector<std::unique_ptr<ceres::CostFunction>>* priors);
+  /// The 3x3 marginal covariances of the key frames at `indices` (ceres::Covariance over the whole graph with a weak
+  /// prior, the gauge's sigmas, on every key frame at its estimate: Ceres needs a full-rank Jacobian, and a direction
+  /// nothing constrains, a graph that one fix and no heading leave free to turn, then has the prior's 1-sigma instead
+  /// of none; against centimetre factors the prior changes a marginal by about 1e-5 of itself). nullopt when Ceres
+  /// cannot compute them.
+  std::optional<std::vector<Eigen::Matrix3d>> covarianceBlocks(const std::vector<int>& indices) const;
 
   PoseGraphConfig config_;
   std::unique_ptr<ceres::LossFunction> fix_loss_;
