@@ -266,6 +266,52 @@ TEST(TileGainCompensator, CellsWrittenOutGiveTheSameGainsInBoundedMemory) {
   std::filesystem::remove_all(folder);
 }
 
+// gainAt() is the gain apply() multiplies a pixel by, at the pixel's centre on the ground: what the tile writer
+// records as the gain of each image of a tile drawn with a tile gain.
+TEST(TileGainCompensator, GainAtIsWhatApplyMultipliesBy) {
+  // A ramp from the far gain (west, south) to the overlap's gain (east, north) over 20 x 15 cells of 0.4 m.
+  ec::TileGains g;
+  g.channels = 3;
+  g.gain = {1.5, 1.4, 1.3};
+  g.far_gain = {0.8, 0.85, 0.9};
+  g.cell_size_m = 0.4;
+  g.ramp_cell_west = 1000;    // cells from the easting 400 m
+  g.ramp_cell_north = 12000;  // the top row's northing 4800 to 4800.4 m
+  g.ramp.create(15, 20, CV_8U);
+  for (int r = 0; r < g.ramp.rows; ++r)
+    for (int c = 0; c < g.ramp.cols; ++c) g.ramp.at<uchar>(r, c) = cv::saturate_cast<uchar>(6.0 * c + 8.0 * (14 - r));
+  TileRaster flat;
+  flat.gsd_m = 0.05;
+  flat.origin_easting_m = 399.0;  // beyond the ramp on every side: its border cells
+  flat.origin_northing_m = 4801.0;
+  flat.image = cv::Mat(150, 200, CV_8UC3, cv::Scalar(150, 150, 150));
+  const TileRaster applied = ec::TileGainCompensator::apply(flat, g);
+  double worst = 0.0, lowest = 10.0, highest = 0.0;
+  for (int r = 0; r < flat.image.rows; r += 3)
+    for (int c = 0; c < flat.image.cols; c += 3) {
+      const std::array<double, 3> at = ec::gainAt(g, flat.origin_easting_m + (c + 0.5) * flat.gsd_m,
+                                                  flat.origin_northing_m - (r + 0.5) * flat.gsd_m);
+      const cv::Vec3b p = applied.image.at<cv::Vec3b>(r, c);
+      for (int k = 0; k < 3; ++k) worst = std::max(worst, std::abs(p[k] - 150.0 * at[k]));
+      lowest = std::min(lowest, at[0]);
+      highest = std::max(highest, at[0]);
+    }
+  std::printf("[ gainAt ] worst %.3f grey at 150, gain %.3f to %.3f\n", worst, lowest, highest);
+  // apply() rounds its output and its resampled ramp to 8 bits: 0.5 + 150 * 0.7 * 0.5 / 255 grey at most. A ramp
+  // misplaced by a tenth of a cell would be off by 150 * 0.7 * 8 / 255 / 10 = 0.33 grey more.
+  EXPECT_LE(worst, 0.75);
+  EXPECT_NEAR(lowest, 0.8, 1e-6);  // both ends of the ramp are reached
+  EXPECT_NEAR(highest, 0.8 + 0.7 * 226.0 / 255.0, 1e-6);
+  // Without a ramp: the far gain everywhere, channels beyond the gains' 1.
+  ec::TileGains grey;
+  grey.channels = 1;
+  grey.far_gain = {1.25, 1.0, 1.0};
+  const std::array<double, 3> at = ec::gainAt(grey, 1e5, 4e6);
+  EXPECT_DOUBLE_EQ(at[0], 1.25);
+  EXPECT_DOUBLE_EQ(at[1], 1.0);
+  EXPECT_DOUBLE_EQ(at[2], 1.0);
+}
+
 TEST(TileGainCompensator, UniformGainKeepsPartOfTheStep) {
   // Without the seam ramp the prior-pulled gain covers the whole tile: the seam keeps P / (1 + P) of the step.
   const Scene scene;

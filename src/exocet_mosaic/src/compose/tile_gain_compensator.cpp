@@ -213,6 +213,27 @@ TileGains TileGainCompensator::estimate(const tiles::TileRaster& raster, int til
   return out;
 }
 
+std::array<double, 3> gainAt(const TileGains& gains, double east_m, double north_m) {
+  std::array<double, 3> out{1.0, 1.0, 1.0};
+  const int channels = std::clamp(gains.channels, 1, 3);
+  double ramp = 0.0;  // 0: far_gain, 1: gain
+  if (!gains.ramp.empty() && gains.cell_size_m > 0.0 && std::isfinite(east_m) && std::isfinite(north_m)) {
+    // Cell coordinates with the cell centres at integers, as apply() maps its pixels.
+    const double u = east_m / gains.cell_size_m - static_cast<double>(gains.ramp_cell_west) - 0.5;
+    const double v = static_cast<double>(gains.ramp_cell_north) + 0.5 - north_m / gains.cell_size_m;
+    const double uc = std::clamp(u, 0.0, static_cast<double>(gains.ramp.cols - 1));
+    const double vc = std::clamp(v, 0.0, static_cast<double>(gains.ramp.rows - 1));
+    const int u0 = static_cast<int>(std::floor(uc)), v0 = static_cast<int>(std::floor(vc));
+    const int u1 = std::min(u0 + 1, gains.ramp.cols - 1), v1 = std::min(v0 + 1, gains.ramp.rows - 1);
+    const double fu = uc - u0, fv = vc - v0;
+    const auto at = [&](int r, int c) { return static_cast<double>(gains.ramp.at<uchar>(r, c)); };
+    ramp = ((1 - fv) * ((1 - fu) * at(v0, u0) + fu * at(v0, u1)) + fv * ((1 - fu) * at(v1, u0) + fu * at(v1, u1))) /
+           255.0;
+  }
+  for (int k = 0; k < channels; ++k) out[k] = gains.far_gain[k] + ramp * (gains.gain[k] - gains.far_gain[k]);
+  return out;
+}
+
 tiles::TileRaster TileGainCompensator::apply(const tiles::TileRaster& raster, const TileGains& gains) {
   const int channels = raster.image.channels();
   if (raster.image.depth() != CV_8U || channels != gains.channels)

@@ -701,7 +701,7 @@ void TileWriterRos::writerLoop() {
     lock.unlock();  // the write takes time: let the composition enqueue meanwhile
     const tiles::WrittenTile tile = writer->write(raster, metadata);
     std::optional<tiles::TileRecord> record;
-    if (tile.ok && config_.keep_images) record = keepRecord(pending, tile, *writer);
+    if (tile.ok && config_.keep_images) record = keepRecord(pending, tile, *writer, gains);
     if (tile.ok && gains) gains_.record(tile.index, raster, *gains);
     lock.lock();
     if (tile.ok && gains) {
@@ -791,8 +791,34 @@ void TileWriterRos::onCorrections(const exocet_msgs::PositionCorrectionsConstPtr
   rerender_cv_.notify_all();
 }
 
+namespace {
+
+/// The tile gain over an image's footprint: the mean of compose::gainAt() on a grid of points of the image.
+std::array<double, 3> drawnTileGain(const compose::TileGains& gains, const tiles::TileRecord& record,
+                                    const tiles::RecordedImage& image) {
+  constexpr int kSteps = 4;
+  std::array<double, 3> sum{0, 0, 0};
+  int n = 0;
+  for (int i = 0; i < kSteps; ++i)
+    for (int j = 0; j < kSteps; ++j) {
+      const cv::Vec3d p =
+          image.ground_from_px * cv::Vec3d((i + 0.5) * image.width_px / kSteps, (j + 0.5) * image.height_px / kSteps, 1);
+      if (!(std::abs(p[2]) > 1e-12)) continue;
+      const std::array<double, 3> g = compose::gainAt(gains, record.ground_origin_en_m.x() + p[0] / p[2],
+                                                      record.ground_origin_en_m.y() + p[1] / p[2]);
+      for (int c = 0; c < 3; ++c) sum[c] += g[c];
+      ++n;
+    }
+  if (n == 0) return compose::gainAt(gains, std::nan(""), std::nan(""));
+  for (double& s : sum) s /= n;
+  return sum;
+}
+
+}  // namespace
+
 std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
-                                                           const tiles::GeoTiffTileWriter& writer) {
+                                                           const tiles::GeoTiffTileWriter& writer,
+                                                           const std::optional<compose::TileGains>& tile_gains) {
   const compose::ClosedMosaic& mosaic = pending.mosaic;
   tiles::TileRecord record;
   record.index = tile.index;
@@ -812,6 +838,7 @@ std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pe
     kept.width_px = image.image.cols;
     kept.height_px = image.image.rows;
     kept.closed_ground_from_px = kept.ground_from_px = image.ground_from_px;
+    if (config_.image_gain_compensation && tile_gains) kept.gain = drawnTileGain(*tile_gains, record, kept);
     kept.closed_correction_m =
         i < pending.image_corrections_m.size() ? pending.image_corrections_m[i] : Eigen::Vector2d::Zero();
     kept.closed_navigation_m = image.navigation_m;

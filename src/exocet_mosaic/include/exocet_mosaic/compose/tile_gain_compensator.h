@@ -85,6 +85,13 @@ struct TileGains {
 };
 
 /**
+ * @brief The gain per channel that TileGainCompensator::apply() multiplies the pixel at ground point (east_m,
+ * north_m) by (the raster's frame, m): far_gain blended towards gain by the ramp, bilinear between cell centres as
+ * apply() samples it, the border cells beyond the ramp; far_gain without a ramp. Channels beyond gains.channels are 1.
+ */
+std::array<double, 3> gainAt(const TileGains& gains, double east_m, double north_m);
+
+/**
  * @brief Live gain compensation between tiles. Keeps per recorded tile (by index) its cells' corrected mean levels
  * and coverage (uint16 each) and its gains with their seam ramp (1 byte per cell): 2 x (channels + 1) + 1 bytes per
  * cell over the bounding box of the tile's data, e.g. 9 KB for a 512 x 512 px BGR tile with 16 px cells, 37 KB for

@@ -87,11 +87,10 @@ struct TileWriterNodeConfig {
   bool image_gain_compensation = true;
   double image_gain_redraw_change = 0.01;  ///< relative change of an image's gain, [0.001, 1]
   /// Tiles whose images' gains each solve takes, the newest, [0, 100000]; the older tiles they overlap are anchors
-  /// (their images keep the gains they were drawn with), the others stay as drawn: the solve's time and memory do not
-  /// grow with the dive (tiles::gainWindow). 0 (default): every tile at each solve. A window leaves steps where an
-  /// anchor's first version, drawn with a tile gain its record does not hold, never got its own images' gains
-  /// (grid bench dive, 8 tiles: level step 5.7 grey against 3.2 with 0).
-  int image_gain_window_tiles = 0;
+  /// (their images keep the gains they were drawn with, a first version's tile gain included), the others stay as
+  /// drawn: the solve's time and memory do not grow with the dive (tiles::gainWindow). 0: every tile at each solve,
+  /// whose levels and working set grow with the dive.
+  int image_gain_window_tiles = 24;
   /// Tiles whose image levels stay in memory, the most recently used, [1, 100000]; the others are read back from the
   /// kept images when a solve takes them again. Not used with image_gain_window_tiles 0.
   int image_gain_levels_cache_tiles = 48;

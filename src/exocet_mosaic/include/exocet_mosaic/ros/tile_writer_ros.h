@@ -107,9 +107,12 @@ class TileWriterRos {
   void enqueue(compose::ClosedMosaic mosaic);
   /// The closed mosaic with the graph corrections its images were placed with (pruned from used_corrections_).
   PendingTile pendingTile(compose::ClosedMosaic mosaic);
-  /// Writer thread, write_mutex_ not held: keeps the new tile's images and record on disk (keep_images).
+  /// Writer thread, write_mutex_ not held: keeps the new tile's images and record on disk (keep_images). With image
+  /// gains, each image's gain in the record is the tile gain the tile was drawn with where the image lies (a gain
+  /// commutes with the blend), so that the record draws the tile as written and lends those gains as an anchor.
   std::optional<tiles::TileRecord> keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
-                                              const tiles::GeoTiffTileWriter& writer);
+                                              const tiles::GeoTiffTileWriter& writer,
+                                              const std::optional<compose::TileGains>& tile_gains);
   /// Writer thread, write_mutex_ not held: writes a revision, removes the previous version, announces it.
   void writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter* writer, std::unique_lock<std::mutex>& lock);
   void rerenderLoop();
