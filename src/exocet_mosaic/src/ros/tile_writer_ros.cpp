@@ -701,7 +701,8 @@ void TileWriterRos::writerLoop() {
     lock.unlock();  // the write takes time: let the composition enqueue meanwhile
     const tiles::WrittenTile tile = writer->write(raster, metadata);
     std::optional<tiles::TileRecord> record;
-    if (tile.ok && config_.keep_images) record = keepRecord(pending, tile, *writer, gains);
+    int levels_added = 0;  // the new images' levels, counted for the gain solve once the record is in records_
+    if (tile.ok && config_.keep_images) record = keepRecord(pending, tile, *writer, gains, &levels_added);
     if (tile.ok && gains) gains_.record(tile.index, raster, *gains);
     lock.lock();
     if (tile.ok && gains) {
@@ -735,6 +736,10 @@ void TileWriterRos::writerLoop() {
       images_kept_ += static_cast<std::int64_t>(record->images.size());
       images_not_kept_ += static_cast<std::int64_t>(pending.mosaic.images.size() - record->images.size());
       records_[record->index] = std::move(*record);
+      // Counted only now: a solve between the levels and the record would take them without their tile (the
+      // window is taken from records_) and not be due again until the next tile.
+      std::lock_guard<std::mutex> gains_lock(image_gains_mutex_);
+      image_levels_added_ += levels_added;
     }
     pending.mosaic.images.clear();  // on disk now
     ROS_INFO("tile writer: %s (%dx%d px, %.3f m/px, EPSG %d, frames %d-%d, %s) in %.0f ms", tile.geotiff_path.c_str(),
@@ -818,7 +823,8 @@ std::array<double, 3> drawnTileGain(const compose::TileGains& gains, const tiles
 
 std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
                                                            const tiles::GeoTiffTileWriter& writer,
-                                                           const std::optional<compose::TileGains>& tile_gains) {
+                                                           const std::optional<compose::TileGains>& tile_gains,
+                                                           int* levels_added) {
   const compose::ClosedMosaic& mosaic = pending.mosaic;
   tiles::TileRecord record;
   record.index = tile.index;
@@ -854,7 +860,7 @@ std::optional<tiles::TileRecord> TileWriterRos::keepRecord(const PendingTile& pe
       const compose::ImageGainsConfig& g = image_gains_.config();
       compose::ImageLevels levels = compose::imageLevels(image.image, g.grid_columns, g.grid_rows);
       std::lock_guard<std::mutex> lock(image_gains_mutex_);
-      if (image_gains_.add(kept.file, std::move(levels))) ++image_levels_added_;
+      if (image_gains_.add(kept.file, std::move(levels))) ++*levels_added;
     }
   }
   saveRecord(record, writer);
@@ -1005,15 +1011,9 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     std::lock_guard<std::mutex> lock(compose_mutex_);
     lighting = std::make_shared<compose::LightingCorrector>(composer_.lightingSnapshot());
   }
-  std::optional<std::map<std::string, std::array<double, 3>>> gains;
-  if (config_.image_gain_compensation) gains = solveImageGains(*lighting, every_tile);
-  // The gain an image of a tile is drawn with from now on: the solution's for a tile the last solve took (1 for an
-  // image it left without a gain), unchanged for the others.
-  const auto gain_now = [&](int tile, const tiles::RecordedImage& image) {
-    if (!image_gain_tiles_.count(tile)) return image.gain;
-    const auto g = gains->find(image.file);
-    return g != gains->end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
-  };
+  if (config_.image_gain_compensation) solveImageGains(*lighting, every_tile);
+  const bool gains = config_.image_gain_compensation;
+  const auto gain_now = [this](int tile, const tiles::RecordedImage& image) { return intendedGain(tile, image); };
   const auto gain_change = [&](int tile, const tiles::RecordedImage& image) {
     const std::array<double, 3> now = gain_now(tile, image);
     double change = 0;
@@ -1032,6 +1032,8 @@ int TileWriterRos::rerenderDue(bool every_tile) {
         for (const tiles::RecordedImage& image : record.images)
           largest_gain_change = std::max(largest_gain_change, gain_change(index, image));
       const bool relit = largest_gain_change > config_.image_gain_redraw_change;
+      // Drawn with them, or near enough not to be drawn again for them: the tile's version on disk is what it lends.
+      if (!relit) intended_gains_.erase(index);
       // Drawing it failed with these corrections: tried again with the next ones, or new gains (solved only when
       // images were added).
       const auto failed = revision_failed_at_.find(index);
@@ -1120,11 +1122,17 @@ bool TileWriterRos::waitForRevisionRoom(bool interruptible) {
   }
 }
 
-std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solveImageGains(
-    const compose::LightingCorrector& lighting, bool always) {
+std::array<double, 3> TileWriterRos::intendedGain(int tile, const tiles::RecordedImage& image) const {
+  const auto intended = intended_gains_.find(tile);
+  if (intended == intended_gains_.end()) return image.gain;
+  const auto g = intended->second.find(image.file);
+  return g != intended->second.end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+}
+
+void TileWriterRos::solveImageGains(const compose::LightingCorrector& lighting, bool always) {
   {
     std::lock_guard<std::mutex> lock(image_gains_mutex_);
-    if (!always && image_levels_added_ == image_levels_solved_) return image_gain_;
+    if (!always && image_levels_added_ == image_levels_solved_) return;
   }
   // The newest tiles solved against the gains the older tiles under them were drawn with: the solve's size does not
   // grow with the dive.
@@ -1145,8 +1153,10 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
     for (const int index : window.anchors) {
       const tiles::TileRecord& record = records_.at(index);
       tiles::addImagePlacements(record, {}, &lighting, grid, &placements);
+      // An anchor lends the gains it is to be drawn with, not those of its version on disk if a drawing with newer
+      // ones is due or under way.
       for (const tiles::RecordedImage& image : record.images)
-        if (!solved_files.count(image.file)) fixed[image.file] = image.gain;  // consecutive tiles share an image
+        if (!solved_files.count(image.file)) fixed[image.file] = intendedGain(index, image);  // tiles share an image
     }
   }
   if (config_.image_gain_window_tiles > 0) {
@@ -1166,15 +1176,33 @@ std::optional<std::map<std::string, std::array<double, 3>>> TileWriterRos::solve
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   if (config_.image_gain_window_tiles > 0) letGoOfLevels(window, window_files);
   if (solution.problem.empty()) {
-    image_gain_ = std::move(solution.gain);
-    image_gain_tiles_ = std::set<int>(window.solved.begin(), window.solved.end());
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    for (const int index : window.solved) {
+      const auto record = records_.find(index);
+      if (record == records_.end()) continue;
+      std::map<std::string, std::array<double, 3>>& intended = intended_gains_[index];
+      intended.clear();
+      for (const tiles::RecordedImage& image : record->second.images) {
+        const auto g = solution.gain.find(image.file);
+        intended[image.file] = g != solution.gain.end() ? g->second : std::array<double, 3>{1.0, 1.0, 1.0};
+      }
+    }
   }
   solution.gain.clear();
+  // Once per tile written (a solve follows new images), or at the last look.
+  if (!window.solved.empty()) {
+    const std::string outcome = solution.problem.empty()
+                                    ? cv::format("%d pairs, level step %.1f -> %.1f grey, %.0f ms", solution.pairs,
+                                                 solution.step_before_grey, solution.step_after_grey, ms)
+                                    : "not solved: " + solution.problem;
+    ROS_INFO("tile writer: image gains of tiles %d-%d (%d images, %d anchors from %zu older tiles): %s",
+             window.solved.front(), window.solved.back(), solution.images - solution.fixed_images,
+             solution.fixed_images, window.anchors.size(), outcome.c_str());
+  }
   std::lock_guard<std::mutex> lock(write_mutex_);
   ++image_gain_solves_;
   last_image_gain_ms_ = ms;
   last_image_gains_ = solution;
-  return image_gain_;
 }
 
 int TileWriterRos::readKeptLevels(const std::vector<std::string>& files, bool new_images, int* unreadable) {

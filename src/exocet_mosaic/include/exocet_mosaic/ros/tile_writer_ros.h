@@ -110,9 +110,11 @@ class TileWriterRos {
   /// Writer thread, write_mutex_ not held: keeps the new tile's images and record on disk (keep_images). With image
   /// gains, each image's gain in the record is the tile gain the tile was drawn with where the image lies (a gain
   /// commutes with the blend), so that the record draws the tile as written and lends those gains as an anchor.
+  /// *levels_added: the images whose levels were added to the gain solve's (the caller counts them once the record
+  /// is in records_).
   std::optional<tiles::TileRecord> keepRecord(const PendingTile& pending, const tiles::WrittenTile& tile,
                                               const tiles::GeoTiffTileWriter& writer,
-                                              const std::optional<compose::TileGains>& tile_gains);
+                                              const std::optional<compose::TileGains>& tile_gains, int* levels_added);
   /// Writer thread, write_mutex_ not held: writes a revision, removes the previous version, announces it.
   void writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter* writer, std::unique_lock<std::mutex>& lock);
   void rerenderLoop();
@@ -124,9 +126,11 @@ class TileWriterRos {
   bool waitForRevisionRoom(bool interruptible);
   static constexpr long kMaxQueuedRevisions = 2;
   /// Rerender thread: solves the images' gains when images were added since the last solve (or `always`) at their
-  /// current placements and the lighting given; @return the new gains per image file, nullopt if not solved.
-  std::optional<std::map<std::string, std::array<double, 3>>> solveImageGains(
-      const compose::LightingCorrector& lighting, bool always);
+  /// current placements and the lighting given, into intended_gains_ for the tiles it took.
+  void solveImageGains(const compose::LightingCorrector& lighting, bool always);
+  /// Rerender thread: the gain an image of a tile is to be drawn with: the last solve that took the tile's (1 for an
+  /// image it left without a gain) until a drawing with it is on disk, otherwise the one its version was drawn with.
+  std::array<double, 3> intendedGain(int tile, const tiles::RecordedImage& image) const;
   /// Rerender thread: the levels of those kept images that are not in image_gains_, read from their files
   /// (`new_images`: counted as added, so that the gains are solved again). @return how many were read; `unreadable`
   /// (optional) counts the files that could not be
@@ -262,9 +266,10 @@ class TileWriterRos {
   compose::ImageGains image_gains_;        ///< levels of the kept images (image_gains_mutex_)
   std::int64_t image_levels_added_ = 0;    ///< (image_gains_mutex_)
   std::int64_t image_levels_solved_ = -1;  ///< rerender thread
-  /// The last solution by image file, of the images of the tiles it solved (rerender thread).
-  std::map<std::string, std::array<double, 3>> image_gain_;
-  std::set<int> image_gain_tiles_;                         ///< the tiles it solved (rerender thread)
+  /// Per tile, by image file, the gains the last solve that took the tile gave its images, kept until the tile's
+  /// version on disk is drawn with them, so that a tile that leaves the window before it is drawn again still is,
+  /// and lends them as an anchor meanwhile (rerender thread).
+  std::map<int, std::map<std::string, std::array<double, 3>>> intended_gains_;
   std::unique_ptr<tiles::TileLevelsCache> levels_cache_;   ///< tiles whose levels are in image_gains_ (rerender thread)
   std::int64_t levels_read_back_ = 0, levels_let_go_ = 0;  ///< images' levels (write_mutex_)
   compose::ImageGainSolution last_image_gains_;            ///< its figures, gains left out (write_mutex_)
