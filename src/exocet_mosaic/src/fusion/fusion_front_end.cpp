@@ -279,10 +279,6 @@ InputOutcome FusionFrontEnd::addDeadReckoning(double stamp_s, const Eigen::Vecto
     }
     if (!attitude) outcome.problem = "no attitude: the filter started at base_link's position, without the lever arm";
     start(stamp_s, camera_en, std::sqrt(covariance_m2.trace() / 2.0), "the dead reckoning", &outcome);
-    // Started at this sample, the filter also knows the DR offset here (zero, within the DR's noise): taken now (the
-    // start is the outcome). Left to the next sample, the offset would inherit what the position lost meanwhile (a
-    // failed first image pair: 0.5 m/s of unknown motion, 0.1-0.16 m) and the 0.5 m fixes would own it all dive.
-    filter_.addDeadReckoning(stamp_s, camera_en, covariance_m2);
     return outcome;
   }
   outcome.update = filter_.addDeadReckoning(stamp_s, camera_en, covariance_m2);

@@ -776,11 +776,7 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
   }
   if (!outcome.update) return;  // refused before the filter
   const bool waiting = outcome.update->status == fu::UpdateStatus::kNotInitialized;
-  // The graph starts at the first metric motion: image failures before it (no camera matrix yet, the first pairs of
-  // a dive) would each make a key frame tied to the last by >= gap_sigma_m, loosening the start's anchor by
-  // sqrt(failures) cm (7 cm after 2 s at 25 Hz) and leaving the map's position to the fixes.
-  if (feeder_ && !waiting && (outcome.metric || feeder_->started())) feedGraph(msg.header.stamp.toSec(), outcome);
-  if (feeder_ && feeder_->started() && !graph_anchored_ && outcome.metric) anchorGraph(msg.previous_stamp.toSec());
+  if (feeder_ && !waiting) feedGraph(msg.header.stamp.toSec(), outcome);
   // A pair without a metric motion reaches the filter as an image failure: its time passes, its covariance grows.
   if (!outcome.metric && !waiting) ++motion_failures_;
   countResult(outcome.metric || waiting ? "image motion" : "image failure", *outcome.update);
@@ -961,7 +957,6 @@ void FusionRos::startGraph() {
     loop_closer_ = std::make_unique<graph::LoopCloser>(loop_config, graph_.get());
   }
   graph_last_yaw_rad_.reset();
-  graph_anchored_ = false;
   key_frame_filter_en_m_.clear();
 }
 
@@ -1056,13 +1051,8 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
     if (!feeder_->started()) {
       key_frame = feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
       // What the filter knew when the graph started (the dead reckoning's or the operator's start): without it the
-      // graph's absolute position rests on the fixes alone. With a known DR offset it waits for a DR sample inside
-      // the image chain (anchorGraph): here, between two DR samples, the position may still carry an image failure's
-      // 0.5 m/s of unknown motion (0.1 m after one frame), and the 0.5 m fixes would then place the whole map.
-      if (!front_end_->filter().drOffsetKnown()) {
-        feeder_->addPositionFix(stamp_s, state.position_en_m, state.position_covariance_m2);
-        graph_anchored_ = true;
-      }
+      // graph's absolute position rests on its first few fixes alone.
+      feeder_->addPositionFix(stamp_s, state.position_en_m, state.position_covariance_m2);
     } else if (outcome.metric) {
       const double yaw_change = graph::wrapAngle(*yaw_rad - graph_last_yaw_rad_.value_or(*yaw_rad));
       key_frame = feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m,
@@ -1084,33 +1074,6 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
     last_problem_ = std::string("pose graph: ") + e.what();
     ROS_WARN_THROTTLE(5.0, "fusion: pose graph: %s", e.what());
   }
-}
-
-void FusionRos::anchorGraph(double covered_to_s) {
-  // The graph's absolute anchor (see feedGraph): the first key frame's position given the dead reckoning, once a DR
-  // sample lies inside the image motion chained from that key frame (up to covered_to_s): the filter's steps since
-  // its start, RTS-smoothed, at the key frame's own stamp (a fix between two key frames would be interpolated
-  // linearly in time, 1-2 cm off while the vehicle accelerates from rest).
-  const double key_frame_s = feeder_->keyFrames().front().stamp_s;
-  const fu::FilterLog& log = front_end_->filter().log();
-  if (log.steps.empty() || log.steps.front().stamp_s > key_frame_s) {
-    graph_anchored_ = true;  // the key frame is older than the filter's history: the fixes alone place the graph
-    return;
-  }
-  bool dr_inside = false;
-  for (const fu::FilterStep& step : log.steps)
-    if (step.stamp_s > key_frame_s && step.stamp_s <= covered_to_s && step.dr_applied > 0) dr_inside = true;
-  if (!dr_inside) return;
-  for (const fu::FilterState& s : fu::smoothRts(log)) {
-    if (s.stamp_s != key_frame_s) continue;
-    try {
-      feeder_->addPositionFix(key_frame_s, s.position_en_m, s.position_covariance_m2);
-    } catch (const std::invalid_argument& e) {
-      ROS_WARN_THROTTLE(5.0, "fusion: pose graph: %s", e.what());
-    }
-    break;
-  }
-  graph_anchored_ = true;
 }
 
 void FusionRos::publishGraphPath() {

@@ -158,10 +158,6 @@ class FusionRos {
   std::unique_ptr<graph::BackgroundPoseGraph> graph_;
   std::unique_ptr<graph::KeyFrameFeeder> feeder_;
   std::optional<double> graph_last_yaw_rad_;
-  /// The graph has its absolute anchor: the filter's position at the graph's start (no DR offset known), else the
-  /// first key frame's smoothed position once a DR sample lies inside its image chain (anchorGraph).
-  bool graph_anchored_ = false;
-  void anchorGraph(double covered_to_s);
   ros::Publisher graph_path_pub_, graph_odometry_pub_, graph_corrections_pub_;
   std::shared_ptr<const graph::GraphSnapshot> last_corrections_snapshot_;  ///< last sent on graph_corrections_pub_
   std::map<int64_t, Eigen::Vector2d> key_frame_filter_en_m_;  ///< the filter's position when each key frame was made
