@@ -1023,6 +1023,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   std::vector<tiles::TileRecord> due;
   std::vector<bool> keep_placements;
   std::vector<double> urgency;  ///< how far past its thresholds a due tile is (the largest of the two ratios)
+  std::vector<bool> out_of_place;  ///< moved by the graph beyond the threshold (not only relit)
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     for (const auto& [index, record] : records_) {
@@ -1046,6 +1047,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
         // Without the graph, or not moved by it: drawn where it is (placementsAt() would fit it to the navigation
         // again, without the tie to its neighbours the composer gave it).
         keep_placements.push_back(track.empty() || (!moved && !every_tile));
+        out_of_place.push_back(moved);
         urgency.push_back(std::max(moved_m / (config_.rerender_threshold_gsd * record.gsd_m),
                                    largest_gain_change / config_.image_gain_redraw_change));
         if (relit && !every_tile && !moved) ++tiles_redrawn_for_gains_;
@@ -1053,14 +1055,19 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     }
   }
   if (due.empty()) return 0;
-  // The tiles most out of place (or most out of tone) first; each drawn only when the writer holds fewer than
+  // The tiles out of place first, then the most out of tone; each drawn only when the writer holds fewer than
   // kMaxQueuedRevisions drawn tiles, as a drawn tile is a whole raster (tens of MB) and after a loop closure or a new
   // gain solution every tile of the dive may be due at once. The periodic pass stops when the node stops; the rest is
   // due again at the next pass (or at the last one, which draws every tile).
   std::vector<std::size_t> order(due.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
   if (!every_tile)
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return urgency[a] > urgency[b]; });
+    // Where a tile is comes before its tone: a fast replay writes tiles faster than this thread can draw them again,
+    // and each new tile's image gains may relight several.
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      if (out_of_place[a] != out_of_place[b]) return static_cast<bool>(out_of_place[a]);
+      return urgency[a] > urgency[b];
+    });
   if (gains)
     for (tiles::TileRecord& record : due)
       for (tiles::RecordedImage& image : record.images) image.gain = gain_now(record.index, image);
