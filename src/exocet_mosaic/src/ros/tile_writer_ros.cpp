@@ -1011,11 +1011,10 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     std::lock_guard<std::mutex> lock(compose_mutex_);
     lighting = std::make_shared<compose::LightingCorrector>(composer_.lightingSnapshot());
   }
-  if (config_.image_gain_compensation) solveImageGains(*lighting, every_tile);
   const bool gains = config_.image_gain_compensation;
-  const auto gain_now = [this](int tile, const tiles::RecordedImage& image) { return intendedGain(tile, image); };
+  if (gains) solveImageGains(*lighting, every_tile);
   const auto gain_change = [&](int tile, const tiles::RecordedImage& image) {
-    const std::array<double, 3> now = gain_now(tile, image);
+    const std::array<double, 3> now = intendedGain(tile, image);
     double change = 0;
     for (int c = 0; c < 3; ++c) change = std::max(change, std::abs(now[c] / image.gain[c] - 1.0));
     return change;
@@ -1070,7 +1069,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
     });
   if (gains)
     for (tiles::TileRecord& record : due)
-      for (tiles::RecordedImage& image : record.images) image.gain = gain_now(record.index, image);
+      for (tiles::RecordedImage& image : record.images) image.gain = intendedGain(record.index, image);
   compose::PlacedImageRenderConfig render;
   render.blend = config_.composer.blend;
   render.feather_power = config_.composer.feather_power;
