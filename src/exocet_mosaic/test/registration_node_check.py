@@ -102,8 +102,21 @@ class RegistrationNodeTest(unittest.TestCase):
         self.assertGreater(m.covariance[0], 0.0)
 
     def test_sequence_with_bad_input(self):
+        # No camera_info is ever published: the first ~camera_info_wait_s (3 s) of images are held back, then
+        # registered when the wait runs out, before the image that ends it.
+        held_stamps = (997.0, 997.1, 997.2)
+        for j, held_stamp in enumerate(held_stamps):
+            self.assertIsNone(self.send(image_msg(view(j), held_stamp), False))
+        before = len(self.motions)
         t, i = 1000.0, 0
-        self.assertIsNone(self.send(image_msg(view(i), t), False))  # the first image only starts the sequence
+        self.pub.publish(image_msg(view(i), t))  # 2.8 s after the last held one: a gap, the sequence restarts
+        deadline = time.time() + 10.0
+        while time.time() < deadline and len(self.motions) < before + 2:
+            time.sleep(0.02)
+        time.sleep(1.0)
+        self.assertEqual([round(m.header.stamp.to_sec(), 6) for m in self.motions[before:]], list(held_stamps[1:]))
+        for m in self.motions[before:]:
+            self.assertShift(m)
         for encoding in ('mono8', 'mono8', 'bgr8', 'rgb8', 'mono16', 'mono16', 'bayer_rggb8', 'bayer_rggb8', 'mono8'):
             t, i = t + 0.1, i + 1
             m = self.send(image_msg(view(i), t, encoding), True)
@@ -165,7 +178,8 @@ class RegistrationNodeTest(unittest.TestCase):
                 break
             time.sleep(0.2)
         self.assertEqual(values.get('images rejected'), '2', values)
-        self.assertEqual(values.get('sequence restarts'), '3', values)
+        self.assertEqual(values.get('images held back for camera_info'), '3', values)
+        self.assertEqual(values.get('sequence restarts'), '4', values)
         self.assertEqual(values.get('pairs failed'), '1', values)
 
 

@@ -2,6 +2,7 @@
 // calibration, bad input. A scripted registrar records what the front-end asks of it.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -227,6 +228,47 @@ TEST(SequenceRegistrar, WithoutDistortionTheCalibrationGivesItsCameraMatrix) {
   ASSERT_TRUE(second.camera_matrix.has_value());
   EXPECT_DOUBLE_EQ((*second.camera_matrix)(1, 1), 61.0);
   EXPECT_DOUBLE_EQ((*second.camera_matrix)(0, 2), 32.0);
+}
+
+TEST(SequenceRegistrar, ImagesBeforeTheFirstCalibrationAreHeldForTheWaitOnly) {
+  SequenceRegistrarConfig config;
+  config.calibration_wait_s = 0.5;
+  CameraCalibration calibration;
+  calibration.size = cv::Size(64, 48);
+  calibration.k = {60.0, 0.0, 32.0, 0.0, 61.0, 24.0, 0.0, 0.0, 1.0};
+
+  // The calibration comes within the wait: nothing is held any more, and the held images, registered then, have
+  // their camera matrix.
+  ScriptedRegistrar::Log log;
+  SequenceRegistrar sequence = scripted(&log, config);
+  for (double t : {1.0, 1.04, 1.08}) EXPECT_TRUE(sequence.holdForCalibration(t)) << t;
+  EXPECT_FALSE(sequence.hasCalibration());
+  sequence.setCalibration(calibration);
+  EXPECT_FALSE(sequence.holdForCalibration(1.12));
+  sequence.add(image(), 1.0);
+  const SequenceStep first_motion = sequence.add(image(), 1.04);
+  ASSERT_TRUE(first_motion.has_motion);
+  ASSERT_TRUE(first_motion.camera_matrix.has_value());
+
+  // No calibration ever: the wait runs out after calibration_wait_s of image time and does not come back; a stamp
+  // that is not finite does not end it.
+  ScriptedRegistrar::Log uncalibrated_log;
+  SequenceRegistrar uncalibrated = scripted(&uncalibrated_log, config);
+  EXPECT_TRUE(uncalibrated.holdForCalibration(2.0));
+  EXPECT_FALSE(uncalibrated.holdForCalibration(std::nan("")));
+  EXPECT_TRUE(uncalibrated.holdForCalibration(2.49));
+  EXPECT_TRUE(uncalibrated.holdForCalibration(1.9));  // stamps went back: the wait counts from there
+  EXPECT_TRUE(uncalibrated.holdForCalibration(2.39));
+  EXPECT_FALSE(uncalibrated.holdForCalibration(2.4));
+  EXPECT_FALSE(uncalibrated.holdForCalibration(2.41));
+  EXPECT_FALSE(uncalibrated.holdForCalibration(1.0));
+
+  // The default holds nothing.
+  ScriptedRegistrar::Log default_log;
+  EXPECT_FALSE(scripted(&default_log).holdForCalibration(1.0));
+
+  config.calibration_wait_s = 61.0;
+  EXPECT_NE(config.validate().find("calibration_wait_s"), std::string::npos);
 }
 
 TEST(SequenceRegistrar, ReplacingTheRegistrarStartsANewSequence) {

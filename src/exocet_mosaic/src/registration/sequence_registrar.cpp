@@ -17,6 +17,8 @@ std::string SequenceRegistrarConfig::validate() const {
     why << "max_gap_s = " << max_gap_s << " is outside (0, 3600] s";
   else if (!(max_prediction_ratio >= 1.0 && max_prediction_ratio <= 100.0))
     why << "max_prediction_ratio = " << max_prediction_ratio << " is outside [1, 100]";
+  else if (!(calibration_wait_s >= 0.0 && calibration_wait_s <= 60.0))
+    why << "calibration_wait_s = " << calibration_wait_s << " is outside [0, 60] s";
   return why.str();
 }
 
@@ -41,6 +43,16 @@ void SequenceRegistrar::restart() {
 }
 
 void SequenceRegistrar::setCalibration(const CameraCalibration& calibration) { calibration_ = calibration; }
+
+bool SequenceRegistrar::holdForCalibration(double stamp_s) {
+  if (calibration_ || calibration_wait_over_ || config_.calibration_wait_s <= 0.0) return false;
+  if (!std::isfinite(stamp_s)) return false;  // add() refuses it, naming the stamp
+  // A stamp before the first one (a bag replayed again) measures the wait from there.
+  if (!first_uncalibrated_stamp_s_ || stamp_s < *first_uncalibrated_stamp_s_) first_uncalibrated_stamp_s_ = stamp_s;
+  if (stamp_s - *first_uncalibrated_stamp_s_ < config_.calibration_wait_s) return true;
+  calibration_wait_over_ = true;
+  return false;
+}
 
 Eigen::Matrix3d SequenceRegistrar::predictionFor(double interval_s) const {
   if (!have_previous_ || last_motion_.failed || previous_interval_s_ <= 0.0 || !(interval_s > 0.0))

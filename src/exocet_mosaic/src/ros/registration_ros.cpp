@@ -37,6 +37,11 @@ RegistrationNodeConfig readRegistrationNodeConfig(const ros::NodeHandle& private
   params.readTopic("camera_info_topic", &config.camera_info_topic);
   params.readBool("undistort", &config.sequence.undistort,
                   "undistort the images with the camera_info's distortion coefficients before registering them");
+  config.sequence.calibration_wait_s = 3.0;  // a live subscription may see images before its first camera_info
+  params.readDouble("camera_info_wait_s", &config.sequence.calibration_wait_s, 0.0, 60.0,
+                    "seconds of images held back at the start until the first camera_info comes (a late "
+                    "subscription must not start the fusion with failed pairs); past it, images are registered "
+                    "without calibration");
   params.readPositiveDouble("max_gap_s", &config.sequence.max_gap_s, 3600.0,
                             "seconds between two images beyond which the sequence restarts");
   params.readInt("queue_size", &config.queue_size, 1, 1000, "images waiting to be registered");
@@ -134,6 +139,7 @@ void RegistrationRos::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
   for (size_t i = 0; i < std::min<size_t>(5, msg->D.size()); ++i) calibration.d[i] = msg->D[i];
   calibration.distortion_model = msg->distortion_model;
   sequence_->setCalibration(calibration);
+  releaseHeldImages();
 }
 
 void RegistrationRos::reject(const std::string& why) {
@@ -216,6 +222,52 @@ void RegistrationRos::process(const cv::Mat& image, const std::string& encoding,
     reject("image with a zero stamp: the motion would have no time");
     return;
   }
+  if (sequence_->holdForCalibration(header.stamp.toSec())) {
+    holdImage(gray, header);
+    return;
+  }
+  releaseHeldImages();  // the wait ran out: they go first, without calibration
+  registerImage(gray, header);
+}
+
+void RegistrationRos::holdImage(const cv::Mat& gray, const std_msgs::Header& header) {
+  // At most this much image data waits: 3 s of a 4K camera at 10 frames/s; a faster one loses its oldest images.
+  constexpr std::size_t kMaxHeldImages = 100, kMaxHeldBytes = std::size_t(256) << 20;
+  ++held_for_camera_info_;
+  held_images_.push_back({gray.clone(), header});  // the converter's output may share the message's buffer
+  held_bytes_ += gray.total() * gray.elemSize();
+  while (held_images_.size() > kMaxHeldImages || held_bytes_ > kMaxHeldBytes) {
+    held_bytes_ -= held_images_.front().gray.total() * held_images_.front().gray.elemSize();
+    held_images_.pop_front();
+    ++dropped_waiting_for_camera_info_;
+    ROS_WARN_THROTTLE(5.0,
+                      "registration: no camera_info yet on %s: the oldest held image dropped (%lu so far; at most "
+                      "%zu images, %zu MB wait)",
+                      config_.camera_info_topic.c_str(), static_cast<unsigned long>(dropped_waiting_for_camera_info_),
+                      kMaxHeldImages, kMaxHeldBytes >> 20);
+  }
+  ROS_DEBUG_THROTTLE(1.0, "registration: no camera_info yet on %s: %zu images held", config_.camera_info_topic.c_str(),
+                     held_images_.size());
+}
+
+void RegistrationRos::releaseHeldImages() {
+  if (held_images_.empty()) return;
+  if (sequence_->hasCalibration()) {
+    ROS_INFO("registration: registering the %zu images held until the first camera_info", held_images_.size());
+  } else {
+    last_problem_ = "no camera_info on " + config_.camera_info_topic + ": images registered without calibration";
+    ROS_WARN(
+        "registration: no camera_info on %s within ~camera_info_wait_s = %.1f s of images: registering without "
+        "calibration (no undistortion, no camera matrix in the motions)",
+        config_.camera_info_topic.c_str(), config_.sequence.calibration_wait_s);
+  }
+  std::deque<HeldImage> held;
+  held.swap(held_images_);
+  held_bytes_ = 0;
+  for (const HeldImage& image : held) registerImage(image.gray, image.header);
+}
+
+void RegistrationRos::registerImage(const cv::Mat& gray, const std_msgs::Header& header) {
   reg::SequenceStep step;
   try {
     step = sequence_->add(gray, header.stamp.toSec());
@@ -307,6 +359,8 @@ void RegistrationRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("transport", active_transport_.empty() ? std::string("none yet") : active_transport_);
   status.add("images received", images_);
   status.add("images rejected", rejected_);
+  status.add("images held back for camera_info", held_for_camera_info_);
+  status.add("images dropped waiting for camera_info", dropped_waiting_for_camera_info_);
   status.add("pairs registered", pairs_);
   status.add("pairs failed", failures_);
   status.add("sequence restarts", restarts_);

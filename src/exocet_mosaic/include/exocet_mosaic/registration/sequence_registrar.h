@@ -34,6 +34,12 @@ struct SequenceRegistrarConfig {
   /// The constant-velocity prediction scales the previous motion by (this interval / previous interval), capped at
   /// this ratio: dropped frames are bridged, a long stall does not extrapolate far [1, 100].
   double max_prediction_ratio = 4.0;
+  /// Images that come before any calibration, within this many seconds of the first one, are to be held back by the
+  /// caller (holdForCalibration) and registered once the calibration comes: the fusion and the tile writer cannot
+  /// place a motion without a camera matrix, and a live subscriber can receive its first images before the first
+  /// camera_info. Past it, the images are registered without calibration (a camera that has none). 0 registers at
+  /// once [0, 60] s.
+  double calibration_wait_s = 0.0;
 
   /// Empty if usable, otherwise what is wrong (naming the field and its allowed range).
   std::string validate() const;
@@ -41,10 +47,10 @@ struct SequenceRegistrarConfig {
 
 /// The camera's intrinsics as sensor_msgs/CameraInfo gives them (no ROS type here).
 struct CameraCalibration {
-  cv::Size size;                    ///< image size the calibration is for
-  std::array<double, 9> k{};        ///< row-major camera matrix
-  std::array<double, 5> d{};        ///< k1, k2, p1, p2, k3 (further coefficients are ignored)
-  std::string distortion_model;     ///< plumb_bob, rational_polynomial (first five used) or empty
+  cv::Size size;                 ///< image size the calibration is for
+  std::array<double, 9> k{};     ///< row-major camera matrix
+  std::array<double, 5> d{};     ///< k1, k2, p1, p2, k3 (further coefficients are ignored)
+  std::string distortion_model;  ///< plumb_bob, rational_polynomial (first five used) or empty
 };
 
 /// What became of one image.
@@ -52,11 +58,11 @@ struct SequenceStep {
   /// False for the first image of a sequence (after a start or a restart): it is kept as the first of the next pair
   /// and gives no motion.
   bool has_motion = false;
-  MotionEstimate motion;            ///< the motion from the previous image to this one (when has_motion)
-  double previous_stamp_s = 0.0;    ///< stamp of the image the motion starts from
-  std::string restart_reason;       ///< non-empty when this image restarted the sequence, and why
-  cv::Size image_size;              ///< of the registered (possibly undistorted) image
-  bool undistorted = false;         ///< the image was undistorted before registration
+  MotionEstimate motion;          ///< the motion from the previous image to this one (when has_motion)
+  double previous_stamp_s = 0.0;  ///< stamp of the image the motion starts from
+  std::string restart_reason;     ///< non-empty when this image restarted the sequence, and why
+  cv::Size image_size;            ///< of the registered (possibly undistorted) image
+  bool undistorted = false;       ///< the image was undistorted before registration
   /// Intrinsics of the registered images: the undistorted camera's when undistorted, the calibration's otherwise;
   /// empty when no calibration of this image size is known.
   std::optional<Eigen::Matrix3d> camera_matrix;
@@ -86,6 +92,14 @@ class SequenceRegistrar {
 
   /// The calibration to undistort with from the next image on (it applies to images of its size only).
   void setCalibration(const CameraCalibration& calibration);
+  bool hasCalibration() const { return calibration_.has_value(); }
+
+  /**
+   * Whether an image stamped `stamp_s` should be held back until the first calibration comes: true while none has
+   * come and `stamp_s` is within calibration_wait_s of the first image asked about. Once the wait has run out it
+   * does not start again. The caller registers the held images (add) when the calibration comes or the wait ends.
+   */
+  bool holdForCalibration(double stamp_s);
 
   /// Forgets the previous image: the next one starts a new sequence.
   void restart();
@@ -109,6 +123,8 @@ class SequenceRegistrar {
   SequenceRegistrarConfig config_;
   std::optional<CameraCalibration> calibration_;
   ImageUndistorter undistorter_;
+  std::optional<double> first_uncalibrated_stamp_s_;  ///< stamp of the first image held back for the calibration
+  bool calibration_wait_over_ = false;                ///< the wait ran out once: it does not start again
 
   bool have_previous_ = false;
   double previous_stamp_s_ = 0.0;

@@ -72,6 +72,12 @@ class RegistrationRos {
   /// Takes the first transport that delivers when ~transport is auto; false if this one must be ignored.
   bool acceptTransport(const std::string& transport);
   void process(const cv::Mat& image, const std::string& encoding, const std_msgs::Header& header);
+  /// Registers one grey image and publishes its motion.
+  void registerImage(const cv::Mat& gray, const std_msgs::Header& header);
+  /// Keeps an image that came before the first camera_info (bounded: the oldest go first).
+  void holdImage(const cv::Mat& gray, const std_msgs::Header& header);
+  /// Registers the held images, oldest first (the camera_info came, or the wait ran out).
+  void releaseHeldImages();
   void reject(const std::string& why);
   void noteRestart(const std::string& why);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -102,6 +108,14 @@ class RegistrationRos {
 
   // Counts for /diagnostics.
   uint64_t images_ = 0, rejected_ = 0, pairs_ = 0, failures_ = 0, restarts_ = 0;
+  struct HeldImage {
+    cv::Mat gray;
+    std_msgs::Header header;
+  };
+  std::deque<HeldImage> held_images_;  ///< before the first camera_info, within ~camera_info_wait_s
+  std::size_t held_bytes_ = 0;
+  uint64_t held_for_camera_info_ = 0;             ///< images held back before the first camera_info
+  uint64_t dropped_waiting_for_camera_info_ = 0;  ///< held images let go to stay within the bound
   std::map<std::string, uint64_t> failures_by_reason_;
   std::deque<bool> recent_failures_;
   std::deque<double> recent_inlier_fraction_;
