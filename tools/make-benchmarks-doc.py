@@ -926,14 +926,16 @@ BENCHMARKS = {
             'samples from the warm-up (10 minutes of dive) to the last frame, in MB per 10 minutes of dive (the '
             'samples after it, when the nodes finish and free what they held, left out). Floor slope: the same line '
             'through the lowest sample of each 5 minutes, what a node keeps between its bursts of work (tiles drawn '
-            'again, loops verified). CPU per frame: the CPU '
-            'time over the frames registered, per 10-minute stretch of the dive.',
+            'again, loops verified). Heap slope (fusion and tile writer): the same line through the memory their heap '
+            'holds, as each reports it on /diagnostics (glibc\'s mallinfo2), apart from the freed memory malloc keeps. '
+            'CPU per frame: the CPU time over the frames registered, per 10-minute stretch of the dive.',
             'Landmarks: the checker targets found in the tiles made of the first and of the last 10 minutes of the '
             'dive, their error against the simulator\'s truth.',
         ],
         'targets': ['No frame dropped; each node\'s memory slope after the warm-up under 1 MB per 10 minutes of '
                     'dive (issue 22).'],
-        'omit': ['attempts', 'nodes.*.rss_mb_series', 'nodes.*.cpu_ms_per_frame_by_stretch', 'registration_lag_s',
+        'omit': ['attempts', 'nodes.*.rss_mb_series', 'nodes.*.heap_in_use_mb_series',
+                 'nodes.*.cpu_ms_per_frame_by_stretch', 'registration_lag_s',
                  'fusion_lag_s', 'tile_writer_*'],
         'groups': {'nodes': 'per node'},
         'figures': [
@@ -947,6 +949,9 @@ BENCHMARKS = {
             ('rss_slope_mb_per_10min', 'memory slope after the warm-up (MB per 10 min of dive)'),
             ('rss_floor_slope_mb_per_10min_max', 'largest slope of a node\'s lowest memory per 5 min (MB per 10 min)'),
             ('rss_floor_slope_mb_per_10min', 'slope of the lowest memory per 5 min of dive (MB per 10 min of dive)'),
+            ('heap_in_use_slope_mb_per_10min', 'slope of the memory the heap holds, after the warm-up (MB per 10 min)'),
+            ('heap_in_use_floor_slope_mb_per_10min', 'slope of the heap\'s lowest per 5 min of dive (MB per 10 min)'),
+            ('heap_in_use_mb_max', 'most memory the heap held (MB)'),
             ('rss_mb_at_warm_up_end', 'resident memory at the end of the warm-up (MB)'),
             ('rss_mb_at_end', 'resident memory at the end of the dive (MB)'),
             ('rss_mb_max', 'peak resident memory (MB)'),

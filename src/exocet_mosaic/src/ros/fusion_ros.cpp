@@ -1278,6 +1278,10 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     for (const auto& kv : *counts) status.add(std::string(name) + ": " + kv.first, kv.second);
   status.add("resets", resets_);
   status.add("late inputs dropped", late_inputs_);
+  if (const auto heap = exocet_common::heapUsage()) {  // resident memory that rises while this stays flat is malloc's
+    status.addf("heap in use (MB)", "%.1f", heap->in_use_mb);
+    status.addf("heap freed, kept by malloc (MB)", "%.1f", heap->free_held_mb);
+  }
   if (config_.keep_smoother_log && !config_.smoother_log_file.empty()) {
     status.add("filter steps written out", front_end_->filter().loggedToFile());
     status.add("filter steps in memory", front_end_->filter().log().steps.size());

@@ -1551,6 +1551,10 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   }
   status.add("last problem", last_problem_.empty() ? stats.last_problem : last_problem_);
   status.add("last write error", write_error);
+  if (const auto heap = exocet_common::heapUsage()) {  // resident memory that rises while this stays flat is malloc's
+    status.addf("heap in use (MB)", "%.1f", heap->in_use_mb);
+    status.addf("heap freed, kept by malloc (MB)", "%.1f", heap->free_held_mb);
+  }
 }
 
 // ---------------------------------------------------------------------------------------------------------------
