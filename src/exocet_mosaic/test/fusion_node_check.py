@@ -255,6 +255,9 @@ class FusionNodeTest(unittest.TestCase):
         self.assertGreaterEqual(self.diag.count('image motion failures'), 1)
         self.assertGreaterEqual(self.diag.count('applied: fix'), 30)
         self.assertEqual(self.diag.get('initialised'), 'True')
+        # What the heap holds (make soak fits its slope): a node with a filter and its tracks holds MBs, not GBs.
+        self.assertTrue(1.0 < float(self.diag.get('heap in use (MB)')) < 4096.0, self.diag.get('heap in use (MB)'))
+        self.assertGreaterEqual(float(self.diag.get('heap freed, kept by malloc (MB)')), 0.0)
 
     def test_2_clock_jump_resets(self):
         # One input from 500 s before the newest is late (a starved node upstream): dropped, no reset. A stream of

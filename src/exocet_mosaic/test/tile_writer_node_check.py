@@ -128,6 +128,9 @@ class TileWriterNodeTest(unittest.TestCase):
         # Key frames: the camera moves 5% of the image per frame, a key frame every 10%: about half are blended.
         self.assertGreaterEqual(int(values['frames composed']), 12)
         self.assertEqual(int(values['tiles lost']), 0, 'nothing is lost while it is retried')
+        # What the heap holds (make soak fits its slope): the open mosaic and the tile kept for a retry, in MB.
+        self.assertTrue(1.0 < float(values['heap in use (MB)']) < 4096.0, values['heap in use (MB)'])
+        self.assertGreaterEqual(float(values['heap freed, kept by malloc (MB)']), 0.0)
 
 
 if __name__ == '__main__':
