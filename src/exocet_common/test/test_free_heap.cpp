@@ -22,6 +22,12 @@ double residentMb() {
 
 }  // namespace
 
+TEST(FreeHeap, ThisTestRunsOnGlibcsMalloc) {
+#if defined(__GLIBC__)
+  EXPECT_EQ(exocet_common::heapAllocator(), "glibc");
+#endif
+}
+
 TEST(FreeHeap, TheFreedMiddleOfTheHeapGoesBackToTheSystem) {
 #if !defined(__GLIBC__)
   GTEST_SKIP() << "glibc's malloc_trim only";

@@ -258,6 +258,8 @@ class FusionNodeTest(unittest.TestCase):
         # What the heap holds (make soak fits its slope): a node with a filter and its tracks holds MBs, not GBs.
         self.assertTrue(1.0 < float(self.diag.get('heap in use (MB)')) < 4096.0, self.diag.get('heap in use (MB)'))
         self.assertGreaterEqual(float(self.diag.get('heap freed, kept by malloc (MB)')), 0.0)
+        # The node runs on jemalloc (exocet_long_running_allocator), found at run time.
+        self.assertEqual(self.diag.get('heap allocator'), 'jemalloc')
 
     def test_2_clock_jump_resets(self):
         # One input from 500 s before the newest is late (a starved node upstream): dropped, no reset. A stream of

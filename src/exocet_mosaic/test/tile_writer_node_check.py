@@ -131,6 +131,8 @@ class TileWriterNodeTest(unittest.TestCase):
         # What the heap holds (make soak fits its slope): the open mosaic and the tile kept for a retry, in MB.
         self.assertTrue(1.0 < float(values['heap in use (MB)']) < 4096.0, values['heap in use (MB)'])
         self.assertGreaterEqual(float(values['heap freed, kept by malloc (MB)']), 0.0)
+        # The node runs on jemalloc (exocet_long_running_allocator), found at run time.
+        self.assertEqual(values.get('heap allocator'), 'jemalloc')
 
 
 if __name__ == '__main__':

@@ -210,7 +210,10 @@ FusionNodeConfig readFusionNodeConfig(const ros::NodeHandle& private_nh) {
         "the first latitude/longitude");
 
   params.readPositiveDouble("path_rate_hz", &c.path_rate_hz, 100.0, "rate at which the paths are republished (Hz)");
-  params.readInt("max_path_poses", &c.max_path_poses, 100, 10000000, "poses per path before thinning");
+  params.readDouble("path_min_spacing_m", &c.path_min_spacing_m, 0.0, 100.0,
+                    "spacing of the poses kept in the fused, navigation and image paths (m)");
+  params.readInt("max_path_poses", &c.max_path_poses, 100, 10000000,
+                 "poses per path; beyond, every other one is dropped and the spacing doubles");
   params.readBool("pose_graph", &c.pose_graph,
                   "run the key frames' pose graph beside the filter and publish it on ~graph_path_topic");
   params.readBool("loop_closure", &c.loop_closure,

@@ -42,7 +42,13 @@ double enuYawFromHeading_rad(double heading_rad) { return M_PI / 2.0 - heading_r
 }  // namespace
 
 FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
-    : nh_(nh), private_nh_(private_nh), config_(readFusionNodeConfig(private_nh)), tf_listener_(tf_buffer_) {
+    : nh_(nh),
+      private_nh_(private_nh),
+      config_(readFusionNodeConfig(private_nh)),
+      tf_listener_(tf_buffer_),
+      fused_path_(config_.path_min_spacing_m, config_.max_path_poses, config_.map_frame),
+      nav_path_(config_.path_min_spacing_m, config_.max_path_poses, config_.map_frame),
+      image_path_(config_.path_min_spacing_m, config_.max_path_poses, config_.map_frame) {
   for (const std::string& stale : removeStaleFusionScratch(private_nh.getNamespace()))
     ROS_INFO("fusion: removed %s, left by a fusion process that is gone", stale.c_str());
   fu::FusionFrontEndConfig front_end;
@@ -120,7 +126,6 @@ FusionRos::FusionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     datum_pub_ = nh_.advertise<exocet_msgs::GeoDatum>(config_.datum_out_topic, 1, true);
   initial_pose_srv_ = private_nh_.advertiseService("set_initial_pose", &FusionRos::onSetInitialPose, this);
   smooth_srv_ = private_nh_.advertiseService("smooth", &FusionRos::onSmooth, this);
-  for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->header.frame_id = config_.map_frame;
 
   updater_.setHardwareID("navigation fusion");
   updater_.add("fusion", this, &FusionRos::diagnose);
@@ -218,7 +223,7 @@ void FusionRos::resetAll(const std::string& why) {
   newest_sample_stamps_.clear();
   awaiting_motion_.clear();
   newest_motion_stamp_s_ = -1e300;
-  for (nav_msgs::Path* path : {&fused_path_, &nav_path_, &image_path_}) path->poses.clear();
+  for (BoundedPath* path : {&fused_path_, &nav_path_, &image_path_}) path->clear();
   // The operator's first point stands for the dive (no navigation): take it again.
   initializeFromParameters();
 }
@@ -673,7 +678,7 @@ void FusionRos::processDeadReckoning(const ros::Time& stamp, const Eigen::Vector
   ++dead_reckonings_;
   enqueue(t, [this, t, base_en_m, covariance_m2, stamp]() {
     const fu::InputOutcome outcome = front_end_->addDeadReckoning(t, base_en_m, covariance_m2);
-    if (outcome.camera_en_m) appendPath(&nav_path_, stamp, *outcome.camera_en_m);
+    if (outcome.camera_en_m) nav_path_.append(stamp, mapPosition(*outcome.camera_en_m));
     handleOutcome("dead reckoning", outcome);
     // Without images the navigation carries the fused track: publish at its rate.
     if (outcome.update && (ros::WallTime::now() - last_motion_wall_).toSec() > 1.0) publishState(stamp);
@@ -781,7 +786,7 @@ void FusionRos::applyMotion(const exocet_msgs::ImageMotion& msg) {
   if (!outcome.metric && !waiting) ++motion_failures_;
   countResult(outcome.metric || waiting ? "image motion" : "image failure", *outcome.update);
   if (waiting) return;
-  if (outcome.metric && outcome.camera_en_m) appendPath(&image_path_, msg.header.stamp, *outcome.camera_en_m);
+  if (outcome.metric && outcome.camera_en_m) image_path_.append(msg.header.stamp, mapPosition(*outcome.camera_en_m));
   publishState(msg.header.stamp);
 }
 
@@ -819,24 +824,9 @@ void FusionRos::setMapOrigin(const Eigen::Vector2d& origin_en_m) {
   static_broadcaster_.sendTransform(t);
 }
 
-void FusionRos::appendPath(nav_msgs::Path* path, const ros::Time& stamp, const Eigen::Vector2d& en_m) {
+Eigen::Vector2d FusionRos::mapPosition(const Eigen::Vector2d& en_m) {
   ensureMapOrigin(en_m);
-  geometry_msgs::PoseStamped pose;
-  pose.header.stamp = stamp;
-  pose.header.frame_id = config_.map_frame;
-  pose.pose.position.x = en_m.x() - map_origin_en_m_->x();
-  pose.pose.position.y = en_m.y() - map_origin_en_m_->y();
-  pose.pose.orientation.w = 1.0;
-  path->poses.push_back(pose);
-  if (static_cast<int>(path->poses.size()) > config_.max_path_poses) {
-    // Bounded memory on a dive of any length: keep every other pose of the older half.
-    std::vector<geometry_msgs::PoseStamped> thinned;
-    thinned.reserve(path->poses.size());
-    const size_t half = path->poses.size() / 2;
-    for (size_t i = 0; i < path->poses.size(); ++i)
-      if (i >= half || i % 2 == 0) thinned.push_back(path->poses[i]);
-    path->poses.swap(thinned);
-  }
+  return en_m - *map_origin_en_m_;
 }
 
 void FusionRos::publishState(const ros::Time& stamp) {
@@ -880,7 +870,7 @@ void FusionRos::publishState(const ros::Time& stamp) {
     moved.pose.pose.position.y += correction.y();
     graph_odometry_pub_.publish(moved);
   }
-  appendPath(&fused_path_, stamp, s.position_en_m);
+  fused_path_.append(stamp, mapPosition(s.position_en_m));
   publishDatum();
   if (camera_height_pub_ && attitude && camera) {
     if (const auto height_m = front_end_->cameraHeightAt(stamp.toSec(), *attitude, *camera)) {
@@ -937,9 +927,14 @@ void FusionRos::publishPaths() {
   const ros::Time now = ros::Time::now();
   for (auto [path, pub] : {std::make_pair(&fused_path_, &fused_path_pub_), std::make_pair(&nav_path_, &nav_path_pub_),
                            std::make_pair(&image_path_, &image_path_pub_)}) {
-    if (path->poses.empty()) continue;
-    path->header.stamp = path->poses.back().header.stamp.isZero() ? now : path->poses.back().header.stamp;
-    pub->publish(*path);
+    if (path->path().poses.empty()) continue;
+    if (path->path().header.stamp.isZero()) {
+      nav_msgs::Path stamped = path->path();
+      stamped.header.stamp = now;
+      pub->publish(stamped);
+    } else {
+      pub->publish(path->path());
+    }
   }
   if (graph_) publishGraphPath();
 }
@@ -1143,11 +1138,10 @@ bool FusionRos::onSmooth(std_srvs::Trigger::Request&, std_srvs::Trigger::Respons
     response.message = "nothing to smooth yet";
     return true;
   }
-  nav_msgs::Path path;
-  path.header.frame_id = config_.map_frame;
-  for (const fu::FilterState& s : smoothed) appendPath(&path, ros::Time(s.stamp_s), s.position_en_m);
-  path.header.stamp = path.poses.back().header.stamp;
-  smoothed_path_pub_.publish(path);
+  // Every smoothed state: asked for once, and published at once.
+  BoundedPath path(0.0, std::max<int>(3, static_cast<int>(smoothed.size())), config_.map_frame);
+  for (const fu::FilterState& s : smoothed) path.append(ros::Time(s.stamp_s), mapPosition(s.position_en_m));
+  smoothed_path_pub_.publish(path.path());
   response.success = true;
   response.message = "smoothed " + std::to_string(smoothed.size()) + " states";
   return true;
@@ -1281,6 +1275,7 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   if (const auto heap = exocet_common::heapUsage()) {  // resident memory that rises while this stays flat is malloc's
     status.addf("heap in use (MB)", "%.1f", heap->in_use_mb);
     status.addf("heap freed, kept by malloc (MB)", "%.1f", heap->free_held_mb);
+    status.add("heap allocator", exocet_common::heapAllocator());
   }
   if (config_.keep_smoother_log && !config_.smoother_log_file.empty()) {
     status.add("filter steps written out", front_end_->filter().loggedToFile());

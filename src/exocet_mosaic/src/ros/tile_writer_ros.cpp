@@ -209,7 +209,7 @@ void TileWriterRos::onImage(const sensor_msgs::ImageConstPtr& msg) {
   if (!acceptTransport("raw")) return;
   acceptImage(
       msg->header,
-      [msg](int) {  // at full size: the composer reduces it
+      [msg](int) {                                                            // at full size: the composer reduces it
         const cv_bridge::CvImageConstPtr shared = cv_bridge::toCvShare(msg);  // throws on a bad message
         return toDisplayImage(shared->image, msg->encoding);
       },
@@ -781,8 +781,9 @@ void TileWriterRos::onCorrections(const exocet_msgs::PositionCorrectionsConstPtr
       if (std::isfinite(msg->east_sigma_m[i]) && std::isfinite(msg->north_sigma_m[i]))
         sigmas[stamps[i]] = {msg->east_sigma_m[i], msg->north_sigma_m[i], msg->east_north_correlation[i]};
   } else if (!msg->east_sigma_m.empty()) {
-    ROS_WARN_THROTTLE(30.0, "tile writer: graph corrections whose 1-sigma arrays differ in length from the stamps: "
-                            "the sigmas are ignored");
+    ROS_WARN_THROTTLE(30.0,
+                      "tile writer: graph corrections whose 1-sigma arrays differ in length from the stamps: "
+                      "the sigmas are ignored");
   }
   int left_out = 0;
   {
@@ -806,8 +807,8 @@ std::array<double, 3> drawnTileGain(const compose::TileGains& gains, const tiles
   int n = 0;
   for (int i = 0; i < kSteps; ++i)
     for (int j = 0; j < kSteps; ++j) {
-      const cv::Vec3d p =
-          image.ground_from_px * cv::Vec3d((i + 0.5) * image.width_px / kSteps, (j + 0.5) * image.height_px / kSteps, 1);
+      const cv::Vec3d p = image.ground_from_px *
+                          cv::Vec3d((i + 0.5) * image.width_px / kSteps, (j + 0.5) * image.height_px / kSteps, 1);
       if (!(std::abs(p[2]) > 1e-12)) continue;
       const std::array<double, 3> g = compose::gainAt(gains, record.ground_origin_en_m.x() + p[0] / p[2],
                                                       record.ground_origin_en_m.y() + p[1] / p[2]);
@@ -1021,7 +1022,7 @@ int TileWriterRos::rerenderDue(bool every_tile) {
   };
   std::vector<tiles::TileRecord> due;
   std::vector<bool> keep_placements;
-  std::vector<double> urgency;  ///< how far past its thresholds a due tile is (the largest of the two ratios)
+  std::vector<double> urgency;     ///< how far past its thresholds a due tile is (the largest of the two ratios)
   std::vector<bool> out_of_place;  ///< moved by the graph beyond the threshold (not only relit)
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
@@ -1321,8 +1322,8 @@ void TileWriterRos::saveCorrections() {
     char line[160];
     for (std::size_t i = 0; i < corrections_.size(); ++i) {
       const double stamp_s = corrections_.stamps()[i];
-      const int length = std::snprintf(line, sizeof(line), "%.6f,%.6f,%.6f", stamp_s,
-                                       corrections_.corrections()[i].x(), corrections_.corrections()[i].y());
+      const int length = std::snprintf(line, sizeof(line), "%.6f,%.6f,%.6f", stamp_s, corrections_.corrections()[i].x(),
+                                       corrections_.corrections()[i].y());
       text.append(line, length);
       const auto sigma = correction_sigmas_.find(stamp_s);
       if (sigma != correction_sigmas_.end()) {
@@ -1554,6 +1555,7 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   if (const auto heap = exocet_common::heapUsage()) {  // resident memory that rises while this stays flat is malloc's
     status.addf("heap in use (MB)", "%.1f", heap->in_use_mb);
     status.addf("heap freed, kept by malloc (MB)", "%.1f", heap->free_held_mb);
+    status.add("heap allocator", exocet_common::heapAllocator());
   }
 }
 

@@ -103,8 +103,11 @@ struct FusionNodeConfig {
   std::string camera_height_topic = "/mosaic/camera_height";
   std::string datum_out_topic = "/mosaic/datum";  ///< exocet_msgs/GeoDatum, latched: the UTM zone of the outputs
   double path_rate_hz = 1.0;                      ///< paths are republished at this rate (0, 100]
-  int max_path_poses = 20000;                     ///< beyond, every other pose is dropped (bounded memory) [100, 1e7]
-  bool keep_smoother_log = true;                  ///< keep the whole dive for the RTS smoother and the track files
+  /// Poses of a path closer than this to the one before are not kept (the newest replaces the path's last) [0, 100]
+  double path_min_spacing_m = 0.05;
+  /// Beyond, every other pose of a path is dropped and its spacing doubles (bounded memory) [100, 1e7]
+  int max_path_poses = 5000;
+  bool keep_smoother_log = true;  ///< keep the whole dive for the RTS smoother and the track files
   /// With keep_smoother_log: the file the filter's older steps are written to as the dive goes (about 1.7 kB a
   /// step), so that the node's memory does not grow with the dive; empty: held in memory. Default
   /// defaultSmootherLogFile() for the node.

@@ -43,6 +43,7 @@
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 #include "exocet_mosaic/graph/loop_closer.h"
 #include "exocet_mosaic/graph/recent_image_buffer.h"
+#include "exocet_mosaic/ros/bounded_path.h"
 #include "exocet_mosaic/ros/fusion_parameters.h"
 #include "exocet_mosaic/ros/keyed_throttle.h"
 
@@ -136,7 +137,8 @@ class FusionRos {
   void publishState(const ros::Time& stamp);
   /// Publishes the UTM zone in use (latched) when it is first known or changes.
   void publishDatum();
-  void appendPath(nav_msgs::Path* path, const ros::Time& stamp, const Eigen::Vector2d& en_m);
+  /// In the map frame (fixing its origin at the first position).
+  Eigen::Vector2d mapPosition(const Eigen::Vector2d& en_m);
   void publishPaths();
   void ensureMapOrigin(const Eigen::Vector2d& en_m);
   void writeTracks();
@@ -222,7 +224,8 @@ class FusionRos {
   /// Wall seconds of inputs all from before the newest, none in order, that make a new dive (a source restarted
   /// without a clock); fewer: late inputs, dropped.
   static constexpr double kLateInputPatience_s = 3.0;
-  nav_msgs::Path fused_path_, nav_path_, image_path_;
+  // Bounded (~path_min_spacing_m, ~max_path_poses): a dive of any length keeps a few MB of paths.
+  BoundedPath fused_path_, nav_path_, image_path_;
   ros::Time last_odometry_stamp_;
 
   // Counts for /diagnostics.
