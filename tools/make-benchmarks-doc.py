@@ -927,7 +927,8 @@ BENCHMARKS = {
             'samples after it, when the nodes finish and free what they held, left out). Floor slope: the same line '
             'through the lowest sample of each 5 minutes, what a node keeps between its bursts of work (tiles drawn '
             'again, loops verified). Heap slope (fusion and tile writer): the same line through the memory their heap '
-            'holds, as each reports it on /diagnostics (glibc\'s mallinfo2), apart from the freed memory malloc keeps. '
+            'holds, as each reports it on /diagnostics (the statistics of jemalloc, which the chain\'s nodes run '
+            'on), apart from the free pages the allocator keeps. '
             'CPU per frame: the CPU time over the frames registered, per 10-minute stretch of the dive.',
             'Landmarks: the checker targets found in the tiles made of the first and of the last 10 minutes of the '
             'dive, their error against the simulator\'s truth.',
