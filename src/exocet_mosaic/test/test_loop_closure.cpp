@@ -180,32 +180,6 @@ TEST(LoopVerifier, SiftKeypointsAreUnbiased) {
   }
 }
 
-TEST(LoopVerifier, EightBitDescriptorsHoldSiftsValues) {
-  // The cached features keep 8-bit descriptors: OpenCV's float SIFT descriptors are whole numbers in [0, 255], so
-  // nothing is lost and the matches are the same.
-  sim::ProceduralSeabedConfig seabed;
-  const Scene scene(seabed, murkyLamp());
-  const cv::Mat img = scene.render(TruePose{0, 0, 2.5, 0.0}, 0);
-  const LoopVerifierConfig config;
-  const LoopFeatures f = LoopVerifier(config).features(img);
-  ASSERT_GT(f.keypoints.size(), 100u);
-  EXPECT_EQ(f.descriptors.type(), CV_8U);
-  EXPECT_EQ(f.descriptors.cols, 128);
-  EXPECT_EQ(f.descriptors.rows, static_cast<int>(f.keypoints.size()));
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat float_descriptors;
-  cv::SIFT::create(config.max_features, 3, config.sift_contrast_threshold)
-      ->detectAndCompute(img, cv::noArray(), keypoints, float_descriptors);
-  ASSERT_EQ(float_descriptors.type(), CV_32F);
-  ASSERT_EQ(float_descriptors.rows, f.descriptors.rows);
-  cv::Mat rounded;
-  float_descriptors.convertTo(rounded, CV_8U);
-  cv::Mat back;
-  rounded.convertTo(back, CV_32F);
-  EXPECT_EQ(cv::norm(back, float_descriptors, cv::NORM_INF), 0.0) << "float SIFT descriptors are not whole numbers";
-  EXPECT_EQ(cv::norm(rounded, f.descriptors, cv::NORM_INF), 0.0);
-}
-
 TEST(LoopVerifier, OutAndBackRevisitsMatchTheTruePoses) {
   const auto start = std::chrono::steady_clock::now();
   sim::ProceduralSeabedConfig seabed;

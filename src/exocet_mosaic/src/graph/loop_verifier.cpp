@@ -158,11 +158,6 @@ void checkLoopView(const LoopView& view, const char* which) {
   }
 }
 
-namespace {
-constexpr double kSiftEdgeThreshold = 10.0;  // cv::SIFT's defaults
-constexpr double kSiftSigma = 1.6;
-}  // namespace
-
 LoopVerifier::LoopVerifier(const LoopVerifierConfig& config) : config_(config) {
   const std::string problem = config.validate();
   if (!problem.empty()) throw std::invalid_argument("LoopVerifierConfig: " + problem);
@@ -173,10 +168,7 @@ LoopFeatures LoopVerifier::features(const cv::Mat& gray) const {
   if (gray.type() != CV_8UC1) throw std::invalid_argument("loop verification: the image is not 8-bit grey (CV_8UC1)");
   LoopFeatures f;
   f.image_size = gray.size();
-  // 8-bit descriptors: OpenCV's SIFT rounds every element to a whole number in [0, 255] for float ones too, so they
-  // hold the same values (and L2 distances) in a quarter of the memory; the loop closer caches dozens of them.
-  cv::Ptr<cv::SIFT> sift =
-      cv::SIFT::create(config_.max_features, 3, config_.sift_contrast_threshold, kSiftEdgeThreshold, kSiftSigma, CV_8U);
+  cv::Ptr<cv::SIFT> sift = cv::SIFT::create(config_.max_features, 3, config_.sift_contrast_threshold);
   sift->detectAndCompute(gray, cv::noArray(), f.keypoints, f.descriptors);
   for (cv::KeyPoint& k : f.keypoints) k.pt -= cv::Point2f(config_.sift_offset_px, config_.sift_offset_px);
   return f;

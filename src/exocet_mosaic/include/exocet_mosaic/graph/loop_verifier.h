@@ -63,7 +63,7 @@ Eigen::Quaterniond downwardLevelFromCamera();
 /// SIFT features of one key frame's image: computed once, matched against many.
 struct LoopFeatures {
   std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;  ///< CV_8U, one row of 128 per keypoint (SIFT's values are whole numbers in [0, 255])
+  cv::Mat descriptors;
   cv::Size image_size;
 };
 
