@@ -6,21 +6,12 @@
 
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <vector>
 
 #include "exocet_common/free_heap.h"
+#include "exocet_common/testing/resident_memory.h"
 
-namespace {
-
-double residentMb() {
-  std::ifstream statm("/proc/self/statm");
-  long size = 0, resident = 0;
-  statm >> size >> resident;
-  return resident * static_cast<double>(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
-}
-
-}  // namespace
+using exocet_common::testing::residentMb;
 
 TEST(FreeHeap, ThisTestRunsOnGlibcsMalloc) {
 #if defined(__GLIBC__)

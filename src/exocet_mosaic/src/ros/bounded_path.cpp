@@ -27,7 +27,7 @@ void BoundedPath::append(const ros::Time& stamp, const Eigen::Vector2d& position
   std::vector<geometry_msgs::PoseStamped>& poses = path_.poses;
   const size_t n = poses.size();
   if (n >= 2) {
-    // The last pose is provisional until it is a spacing away from the one before: then it stays.
+    // The last pose follows the newest position while it lies within a spacing of the one before it.
     const geometry_msgs::Point& a = poses[n - 2].pose.position;
     const geometry_msgs::Point& b = poses[n - 1].pose.position;
     if (std::hypot(b.x - a.x, b.y - a.y) < spacing_m_) {
