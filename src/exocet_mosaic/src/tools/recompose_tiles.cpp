@@ -5,6 +5,9 @@
 // With --tile-adjustment the tiles so drawn are first registered with each other and each moved by one similarity
 // (tile_network_adjustment.h, what adjust_tiles does); not by default: on the PAL and grid bench dives and the sample
 // out-and-back dive the overlapping pairs agree better without it (PAL every pair 0.87-1.14 px against 1.13-1.21).
+// Then the images themselves are moved into agreement where they overlap, return passes and crossings included: tie
+// points between overlapping images, one ground shift per image (image_network_adjustment.h; --no-image-adjustment:
+// the graph's placements as they are).
 // Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the last graph corrections it received
 // (graph_corrections.csv there, or --corrections). The live tiles are kept.
 //   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
@@ -33,6 +36,7 @@
 #include "exocet_mosaic/compose/lighting_corrector.h"
 #include "exocet_mosaic/compose/tile_gain_compensator.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
+#include "exocet_mosaic/tiles/image_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
 #include "exocet_mosaic/tiles/tile_writer_resume.h"
@@ -100,7 +104,8 @@ std::map<std::string, std::array<double, 3>> openCvGains(const std::map<std::str
 int main(int argc, char** argv) {
   std::string tiles_dir, output_dir, corrections_path, report, prefix = "tile", blend = "feather", gain_model = "image";
   et::RevisionConfig revision;
-  bool gain_compensation = true, tile_adjustment = false, lighting_correction = true;
+  bool gain_compensation = true, tile_adjustment = false, lighting_correction = true, image_adjustment = true;
+  et::ImageAdjustmentConfig image_adjustment_config;
   int adjustment_passes = 1;
   CLI::App app(
       "Draws every tile of a dive again, per image, at the pose graph's final corrections: the records and images the\n"
@@ -144,11 +149,40 @@ int main(int argc, char** argv) {
   app.add_flag("--tile-adjustment,!--no-tile-adjustment", tile_adjustment,
                "register the overlapping tiles with each other and move each by one similarity before the last "
                "drawing (default: the images placed by the graph only)");
+  app.add_flag("--image-adjustment,!--no-image-adjustment", image_adjustment,
+               "move each image by a ground shift that brings it into agreement with the images it overlaps (tie "
+               "points; the pose graph's placement as a weak prior) before the gains and the drawing")
+      ->capture_default_str();
+  app.add_option("--image-ties", image_adjustment_config.tie_method,
+                 "with --image-adjustment: patches (phase correlation of the two images drawn on their common ground) "
+                 "| sift (SIFT keypoints)")
+      ->check(CLI::IsMember({"patches", "sift"}))
+      ->capture_default_str();
+  app.add_option("--image-min-overlap", image_adjustment_config.min_overlap_fraction,
+                 "with --image-adjustment: common ground of two images, over the smaller one, for them to be paired, "
+                 "(0, 1]")
+      ->capture_default_str();
+  app.add_option("--image-pairs-per-pass", image_adjustment_config.max_cross_pairs_per_pass,
+                 "with --image-adjustment: pairs of an image with each other pass it overlaps, [0, 50]")
+      ->capture_default_str();
+  app.add_option("--image-position-sigma-m", image_adjustment_config.prior_sigma_m,
+                 "with --image-adjustment: how far an image's centre may move from the graph's placement (1-sigma, m), "
+                 "(0, 100]")
+      ->capture_default_str();
+  app.add_option("--image-scale-sigma", image_adjustment_config.scale_prior_sigma,
+                 "with --image-adjustment: how much an image's scale may change (1-sigma), (0, 1]")
+      ->capture_default_str();
+  app.add_option("--image-search-radius-px", image_adjustment_config.search_radius_px,
+                 "with --image-adjustment: how far (image px) a tie point may be from where the graph's placements "
+                 "put it, (0, 200]")
+      ->capture_default_str();
   app.add_option("--report", report, "also write what was done as JSON")->type_name("FILE.json");
   app.footer("Exit status: 0 written, 2 bad input (the message names it), 1 a write failed.");
   if (const auto exit_status = exocet_common::parseCommandLine(app, argc, argv)) return *exit_status;
   const std::string invalid = revision.validate();
   if (!invalid.empty()) return badInput(invalid);
+  const std::string invalid_adjustment = image_adjustment_config.validate();
+  if (!invalid_adjustment.empty()) return badInput(invalid_adjustment);
   if (std::filesystem::equivalent(tiles_dir, output_dir)) return badInput("--output must differ from --tiles");
   const std::string records_dir = tiles_dir + "/.exocet_images";
   if (corrections_path.empty()) corrections_path = records_dir + "/graph_corrections.csv";
@@ -264,6 +298,93 @@ int main(int argc, char** argv) {
     std::filesystem::remove_all(scratch, error);
   }
 
+  // Where the final drawing puts each image: the graph's placements (and the tiles' adjustment), then each image's
+  // shift into agreement with the images it overlaps.
+  std::vector<std::vector<cv::Matx33d>> placements;
+  for (const et::TileRecord& record : records) placements.push_back(et::placementsAt(record, track, revision));
+  nlohmann::ordered_json image_adjustment_json = {{"done", false}};
+  if (image_adjustment) {
+    // One image per tile it is drawn in: consecutive tiles share an image, each placing it by its own chain, and the
+    // shared image's two placements are then tied by its own pixels.
+    std::vector<et::AdjustableImage> images;
+    std::map<std::string, std::string> file_of;
+    std::vector<std::vector<std::size_t>> index_of(records.size());
+    for (std::size_t k = 0; k < records.size(); ++k) {
+      const cv::Matx33d en_from_ground(1, 0, records[k].ground_origin_en_m.x(), 0, 1,
+                                       records[k].ground_origin_en_m.y(), 0, 0, 1);
+      for (std::size_t i = 0; i < records[k].images.size(); ++i) {
+        const et::RecordedImage& image = records[k].images[i];
+        et::AdjustableImage a;
+        a.id = image.file + " in tile " + std::to_string(records[k].index);
+        a.stamp_s = image.stamp_s;
+        a.en_from_px = en_from_ground * placements[k][i];
+        a.size_px = cv::Size(image.width_px, image.height_px);
+        a.gsd_m = records[k].gsd_m;
+        file_of[a.id] = image.file;
+        index_of[k].push_back(images.size());
+        images.push_back(a);
+      }
+    }
+    const et::ImageAdjustment solved = et::adjustImages(
+        images,
+        [&records_dir, &file_of, &prepare](const std::string& id) {
+          // As drawn: with the dive's lighting correction, whose field would otherwise pull the correlations.
+          cv::Mat pixels = cv::imread(records_dir + "/" + file_of.at(id), cv::IMREAD_UNCHANGED);
+          if (pixels.empty()) return pixels;
+          if (prepare) pixels = prepare(pixels);
+          if (pixels.channels() == 3) cv::cvtColor(pixels, pixels, cv::COLOR_BGR2GRAY);
+          return pixels;
+        },
+        image_adjustment_config);
+    if (!solved.problem.empty()) {
+      std::cerr << "recompose_tiles: the images were not adjusted (" << solved.problem
+                << "): drawn at the graph's placements\n";
+    } else {
+      for (std::size_t k = 0; k < records.size(); ++k)
+        for (std::size_t i = 0; i < records[k].images.size(); ++i)
+          placements[k][i] =
+              et::movedPlacement(placements[k][i], solved.move_en[index_of[k][i]], records[k].ground_origin_en_m);
+      int cross = 0;
+      for (const et::ImagePairTies& p : solved.pairs) cross += p.cross_pass ? 1 : 0;
+      std::printf("recompose_tiles: images adjusted: %zu images, %zu pairs measured (%d across passes) of %d tried, "
+                  "%d tie points; across passes the largest RMS disagreement %.2f px before, %.2f px left; images moved "
+                  "by up to %.4f m and %.2f mrad\n",
+                  images.size(), solved.pairs.size(), cross, solved.pairs_tried, solved.ties,
+                  solved.cross_before_max_px, solved.cross_after_max_px, solved.shift_max_m,
+                  1e3 * solved.rotation_max_rad);
+      image_adjustment_json = {{"done", true},
+                               {"images", images.size()},
+                               {"images_with_features", solved.images_with_features},
+                               {"pairs_tried", solved.pairs_tried},
+                               {"pairs", solved.pairs.size()},
+                               {"cross_pass_pairs", cross},
+                               {"tie_points", solved.ties},
+                               {"cross_pass_rms_max_px_before", solved.cross_before_max_px},
+                               {"cross_pass_rms_max_px_after", solved.cross_after_max_px},
+                               {"shift_max_m", solved.shift_max_m},
+                               {"rotation_max_rad", solved.rotation_max_rad}};
+      nlohmann::ordered_json pairs = nlohmann::ordered_json::array(), shifts = nlohmann::ordered_json::object();
+      for (const et::ImagePairTies& p : solved.pairs)
+        pairs.push_back({{"a", images[p.a].id},
+                         {"b", images[p.b].id},
+                         {"cross_pass", p.cross_pass},
+                         {"matches", p.matches},
+                         {"ties", p.on_a_en_m.size()},
+                         {"rms_before_px", p.before_px},
+                         {"rms_after_px", p.after_px}});
+      for (std::size_t i = 0; i < images.size(); ++i)
+        shifts[images[i].id] = {{"shift_en_m", {solved.shift_en_m[i].x(), solved.shift_en_m[i].y()}},
+                                {"rotation_rad", solved.rotation_rad[i]},
+                                {"scale_change", solved.scale_change[i]},
+                                {"file", file_of.at(images[i].id)},
+                                {"en_from_px_before", std::vector<double>(images[i].en_from_px.val,
+                                                                          images[i].en_from_px.val + 9)}};
+      image_adjustment_json["pair_list"] = pairs;
+      image_adjustment_json["image_moves"] = shifts;
+    }
+    if (!solved.problem.empty()) image_adjustment_json["problem"] = solved.problem;
+  }
+
   et::TileWriterConfig files;
   files.output_dir = output_dir;
   files.prefix = prefix;
@@ -271,13 +392,13 @@ int main(int argc, char** argv) {
   const std::map<int, std::array<double, 3>> solved_gains = joint.solve();
   if (gain_compensation && gain_model != "tile") {
     // Each image's gain, from where the final drawing puts it.
-    std::map<std::string, ec::ImagePlacement> placements;
-    for (const et::TileRecord& record : records)
-      et::addImagePlacements(record, et::placementsAt(record, track, revision), prepare ? lighting.get() : nullptr,
-                             gain_grid, &placements);
+    std::map<std::string, ec::ImagePlacement> image_placements;
+    for (std::size_t k = 0; k < records.size(); ++k)
+      et::addImagePlacements(records[k], placements[k], prepare ? lighting.get() : nullptr, gain_grid,
+                             &image_placements);
     std::map<std::string, std::array<double, 3>> gain_of_file;
     if (gain_model == "image") {
-      const ec::ImageGainSolution solution = image_gains.solve(placements);
+      const ec::ImageGainSolution solution = image_gains.solve(image_placements);
       if (!solution.problem.empty())
         std::cerr << "recompose_tiles: no image gains (" << solution.problem << "): drawn with gain 1\n";
       else
@@ -286,7 +407,7 @@ int main(int argc, char** argv) {
                     solution.step_before_grey, solution.step_after_grey);
       gain_of_file = solution.gain;
     } else {
-      gain_of_file = openCvGains(placements, records_dir, prepare, 4.0 * records.front().gsd_m);
+      gain_of_file = openCvGains(image_placements, records_dir, prepare, 4.0 * records.front().gsd_m);
       std::printf("recompose_tiles: OpenCV's compensator: gains of %zu images\n", gain_of_file.size());
     }
     for (et::TileRecord& record : records)
@@ -298,8 +419,9 @@ int main(int argc, char** argv) {
   nlohmann::ordered_json json;
   json["tiles"] = nlohmann::ordered_json::array();
   int written = 0, failed = 0;
-  for (et::TileRecord record : records) {
-    et::RevisedTile tile = et::renderTileAt(record, track, records_dir, render, revision, prepare);
+  for (std::size_t k = 0; k < records.size(); ++k) {
+    const et::TileRecord& record = records[k];
+    et::RevisedTile tile = et::renderTileWith(record, placements[k], records_dir, render, prepare);
     if (tile.raster.image.empty()) {
       std::cerr << "recompose_tiles: tile " << record.index << " not drawn: " << tile.problem << "\n";
       ++failed;
@@ -336,6 +458,7 @@ int main(int argc, char** argv) {
     json["failed"] = failed;
     json["graph_key_frames"] = track.size();
     json["tiles_adjusted"] = adjusted;
+    json["image_adjustment"] = image_adjustment_json;
     try {
       exocet_common::writeJsonFileAtomically(report, json);
     } catch (const std::exception& e) {
