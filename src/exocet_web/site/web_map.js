@@ -12,7 +12,7 @@
   const stats = {
     tileLoads: 0, tileErrors: 0, failedTiles: [], events: 0, resets: 0, webTileEvents: 0, tileEvents: 0,
     trackPoints: 0, usblFixes: 0, footprints: 0, connected: false, lastEventId: null, loadedRevs: {},
-    pageLoadedAt: Date.now(), lastTile: null, cutEventIds: {}, cutVersions: {},
+    pageLoadedAt: Date.now(), lastTile: null, cutEventIds: {}, cutVersions: {}, cutDoneIds: {},
   };
 
   const map = L.map('map', { zoomControl: true, maxZoom: 28, worldCopyJump: false });
@@ -356,6 +356,7 @@
     // A cut comes as two events, the finest level first: the first one of each version is the cut's.
     if (d.levels !== 'coarser' || stats.cutVersions[d.key] !== d.version) stats.cutEventIds[d.key] = id;
     stats.cutVersions[d.key] = d.version;
+    if (d.levels !== 'finest') stats.cutDoneIds[d.key] = id;  // every level of this version is cut
     const zoomChanged = d.zoom.min !== zoom.min || d.zoom.max !== zoom.max;
     if (zoomChanged) setZoomRange(d.zoom);
     const changed = new Set();
@@ -440,7 +441,7 @@
 
   // For tests and the browser's console.
   window.EXOCET = { map: map, mosaic: mosaic, stats: stats, tileExists: tileExists, setFollow: setFollow,
-                    following: () => follow, zoom: () => zoom,
+                    following: () => follow, zoom: () => zoom, mosaicLoading: () => mosaic.isLoading(),
                     footprintBounds: key => footprintByKey.has(key) ? footprintByKey.get(key).getBounds() : null };
   if (LIVE) {
     if (window.EXOCET_STATE) applyState(window.EXOCET_STATE);  // at once, then the live state

@@ -22,6 +22,8 @@ namespace tiles {
 
 namespace {
 
+constexpr double kSameImageSigmaPx = 0.05;  ///< ties of two drawings of one image: exact, held tight
+
 Eigen::Vector2d apply(const cv::Matx33d& h, double x, double y) {
   const cv::Vec3d p = h * cv::Vec3d(x, y, 1.0);
   return Eigen::Vector2d(p[0] / p[2], p[1] / p[2]);
@@ -72,6 +74,8 @@ class GreyCache {
   std::map<std::string, std::pair<cv::Mat, std::uint64_t>> kept_;
   std::uint64_t clock_ = 0;
 };
+
+const std::string& sourceOf(const AdjustableImage& image) { return image.source.empty() ? image.id : image.source; }
 
 Footprint footprintOf(const AdjustableImage& image, const Eigen::Vector2d& origin) {
   Footprint f;
@@ -308,6 +312,8 @@ std::string ImageAdjustmentConfig::validate() const {
   check(rotation_prior_sigma_rad > 0 && rotation_prior_sigma_rad <= 1, "rotation_prior_sigma_rad must be in (0, 1]");
   check(scale_prior_sigma > 0 && scale_prior_sigma <= 1, "scale_prior_sigma must be in (0, 1]");
   check(prior_sigma_m > 0 && prior_sigma_m <= 100, "prior_sigma_m must be in (0, 100]");
+  check(passes >= 1 && passes <= 10, "passes must be in [1, 10]");
+  check(max_pair_rms_px > 0 && max_pair_rms_px <= 100, "max_pair_rms_px must be in (0, 100]");
   check(huber_sigmas > 0 && huber_sigmas <= 100, "huber_sigmas must be in (0, 100]");
   return bad.str();
 }
@@ -411,128 +417,187 @@ ImageAdjustment adjustImages(const std::vector<AdjustableImage>& images,
     for (const Features& f : features) out.images_with_features += f.points.empty() ? 0 : 1;
   }
 
-  std::vector<ImagePairTies> measured(candidates.size());
-  std::vector<char> readable(images.size(), 0);
-  cv::parallel_for_(cv::Range(0, static_cast<int>(candidates.size())), [&](const cv::Range& range) {
-    for (int k = range.start; k < range.end; ++k) {
-      const auto [a, b] = candidates[k];
-      std::vector<Eigen::Vector2d> on_a, on_b;
-      if (by_features) {
-        featureTies(images[a], images[b], features[a], features[b], config, &on_a, &on_b);
-      } else {
-        const cv::Mat grey_a = greys.get(images[a].id), grey_b = greys.get(images[b].id);
-        readable[a] = readable[a] || !grey_a.empty();
-        readable[b] = readable[b] || !grey_b.empty();
-        patchTies(images[a], images[b], grey_a, grey_b, config, &on_a, &on_b);
-      }
-      measured[k] = keptTies(on_a, on_b, std::min(images[a].gsd_m, images[b].gsd_m), config);
-      measured[k].a = a, measured[k].b = b;
-      measured[k].cross_pass = std::abs(images[a].stamp_s - images[b].stamp_s) > config.same_pass_s;
-    }
-  });
-  if (!by_features)
-    for (const char r : readable) out.images_with_features += r ? 1 : 0;
-  for (ImagePairTies& p : measured)
-    if (!p.on_a_en_m.empty()) out.pairs.push_back(std::move(p));
-  if (out.pairs.empty()) {
-    out.problem = "no pair of overlapping images with " + std::to_string(config.min_ties) + " tie points";
-    return out;
-  }
-
-  // Linear least squares on (t_e, t_n, theta, s) per image, about its centre, in metres from `origin`: each tie
-  // point's disagreement after the moves, (x_a + A_a u_a) - (x_b + A_b u_b), over its 1-sigma, Huber-reweighted; the
-  // priors keep each image near the graph's placement.
-  std::vector<Eigen::Vector2d> centre(images.size());
-  for (int i = 0; i < n; ++i)
-    centre[i] = apply(images[i].en_from_px, 0.5 * images[i].size_px.width, 0.5 * images[i].size_px.height) - origin;
-  std::vector<double> tie_weight;  // 1 / sigma^2 per pair
-  for (const ImagePairTies& p : out.pairs) {
-    const double sigma_m = config.tie_sigma_px * std::min(images[p.a].gsd_m, images[p.b].gsd_m);
-    tie_weight.push_back(1.0 / (sigma_m * sigma_m));
-    out.ties += static_cast<int>(p.on_a_en_m.size());
-  }
-  std::vector<std::vector<double>> huber(out.pairs.size());
-  for (std::size_t k = 0; k < out.pairs.size(); ++k) huber[k].assign(out.pairs[k].on_a_en_m.size(), 1.0);
-  const double prior[4] = {1.0 / (config.prior_sigma_m * config.prior_sigma_m),
-                           1.0 / (config.prior_sigma_m * config.prior_sigma_m),
-                           1.0 / (config.rotation_prior_sigma_rad * config.rotation_prior_sigma_rad),
-                           1.0 / (config.scale_prior_sigma * config.scale_prior_sigma)};
-  Eigen::VectorXd u = Eigen::VectorXd::Zero(4 * n);
-  const auto residual = [&](const ImagePairTies& p, std::size_t t) {
-    const Eigen::Vector2d xa = p.on_a_en_m[t] - origin, xb = p.on_b_en_m[t] - origin;
-    return Eigen::Vector2d(xa + moveJacobian(xa, centre[p.a]) * u.segment<4>(4 * p.a) - xb -
-                           moveJacobian(xb, centre[p.b]) * u.segment<4>(4 * p.b));
-  };
-  for (int iteration = 0; iteration < 8; ++iteration) {
-    std::vector<Eigen::Triplet<double>> triplets;
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(4 * n);
-    for (int i = 0; i < n; ++i)
-      for (int c = 0; c < 4; ++c) triplets.emplace_back(4 * i + c, 4 * i + c, prior[c]);
-    for (std::size_t k = 0; k < out.pairs.size(); ++k) {
-      const ImagePairTies& p = out.pairs[k];
-      Eigen::Matrix4d aa = Eigen::Matrix4d::Zero(), ab = Eigen::Matrix4d::Zero(), bb = Eigen::Matrix4d::Zero();
-      Eigen::Vector4d ra = Eigen::Vector4d::Zero(), rb = Eigen::Vector4d::Zero();
-      for (std::size_t t = 0; t < p.on_a_en_m.size(); ++t) {
-        const Eigen::Vector2d xa = p.on_a_en_m[t] - origin, xb = p.on_b_en_m[t] - origin;
-        const Eigen::Matrix<double, 2, 4> ja = moveJacobian(xa, centre[p.a]), jb = -moveJacobian(xb, centre[p.b]);
-        const Eigen::Vector2d e0 = xa - xb;
-        const double w = tie_weight[k] * huber[k][t];
-        aa += w * ja.transpose() * ja;
-        ab += w * ja.transpose() * jb;
-        bb += w * jb.transpose() * jb;
-        ra -= w * ja.transpose() * e0;
-        rb -= w * jb.transpose() * e0;
-      }
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) {
-          triplets.emplace_back(4 * p.a + r, 4 * p.a + c, aa(r, c));
-          triplets.emplace_back(4 * p.b + r, 4 * p.b + c, bb(r, c));
-          triplets.emplace_back(4 * p.a + r, 4 * p.b + c, ab(r, c));
-          triplets.emplace_back(4 * p.b + c, 4 * p.a + r, ab(r, c));
+  // Passes: the pairs measured on the drawings as they are, the moves solved, the drawings moved; the next pass
+  // measures what is left (a patch's phase correlation reads a large offset short by a fraction of it).
+  std::vector<AdjustableImage> working = images;
+  Eigen::VectorXd u_total = Eigen::VectorXd::Zero(4 * n);
+  std::map<std::pair<int, int>, double> first_before_px;
+  for (int pass = 0; pass < config.passes; ++pass) {
+    std::vector<ImagePairTies> measured(candidates.size());
+    std::vector<char> readable(images.size(), 0);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(candidates.size())), [&](const cv::Range& range) {
+      for (int k = range.start; k < range.end; ++k) {
+        const auto [a, b] = candidates[k];
+        std::vector<Eigen::Vector2d> on_a, on_b;
+        if (sourceOf(working[a]) == sourceOf(working[b])) {
+          // One image drawn in two tiles: where each drawing puts a grid of its pixels.
+          ImagePairTies& same = measured[k];
+          for (int y = 0; y <= 4; ++y)
+            for (int x = 0; x <= 4; ++x) {
+              const double u = 0.25 * x * working[a].size_px.width, v = 0.25 * y * working[a].size_px.height;
+              same.on_a_en_m.push_back(apply(working[a].en_from_px, u, v));
+              same.on_b_en_m.push_back(apply(working[b].en_from_px, u, v));
+            }
+          double sum2 = 0;
+          for (std::size_t t = 0; t < same.on_a_en_m.size(); ++t)
+            sum2 += (same.on_b_en_m[t] - same.on_a_en_m[t]).squaredNorm();
+          same.same_image = true;
+          same.matches = static_cast<int>(same.on_a_en_m.size());
+          same.before_px = std::sqrt(sum2 / same.on_a_en_m.size()) / std::min(working[a].gsd_m, working[b].gsd_m);
+          same.a = a, same.b = b;
+          continue;
         }
-      rhs.segment<4>(4 * p.a) += ra;
-      rhs.segment<4>(4 * p.b) += rb;
-    }
-    Eigen::SparseMatrix<double> normal(4 * n, 4 * n);
-    normal.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(normal);
-    if (solver.info() != Eigen::Success) {
-      out.problem = "the normal equations could not be factored";
+        if (by_features) {
+          featureTies(working[a], working[b], features[a], features[b], config, &on_a, &on_b);
+        } else {
+          const cv::Mat grey_a = greys.get(working[a].id), grey_b = greys.get(working[b].id);
+          readable[a] = readable[a] || !grey_a.empty();
+          readable[b] = readable[b] || !grey_b.empty();
+          patchTies(working[a], working[b], grey_a, grey_b, config, &on_a, &on_b);
+        }
+        measured[k] = keptTies(on_a, on_b, std::min(working[a].gsd_m, working[b].gsd_m), config);
+        measured[k].a = a, measured[k].b = b;
+        measured[k].cross_pass = std::abs(working[a].stamp_s - working[b].stamp_s) > config.same_pass_s;
+      }
+    });
+    if (!by_features && pass == 0)
+      for (const char r : readable) out.images_with_features += r ? 1 : 0;
+    out.pairs.clear();
+    out.pairs_rejected = 0;
+    out.ties = 0;
+    for (ImagePairTies& p : measured)
+      if (!p.on_a_en_m.empty()) out.pairs.push_back(std::move(p));
+    if (out.pairs.empty()) {
+      out.problem = "no pair of overlapping images with " + std::to_string(config.min_ties) + " tie points";
       return out;
     }
-    u = solver.solve(rhs);
-    bool changed = false;
-    for (std::size_t k = 0; k < out.pairs.size(); ++k)
-      for (std::size_t t = 0; t < huber[k].size(); ++t) {
-        const double e = residual(out.pairs[k], t).norm() * std::sqrt(tie_weight[k]);
-        const double h = e > config.huber_sigmas ? config.huber_sigmas / e : 1.0;
-        changed = changed || std::abs(h - huber[k][t]) > 1e-3;
-        huber[k][t] = h;
+
+    // Linear least squares on (t_e, t_n, theta, s) per image, about its centre, in metres from `origin`: each tie
+    // point's disagreement after the moves, (x_a + A_a u_a) - (x_b + A_b u_b), over its 1-sigma, Huber-reweighted; the
+    // priors keep each image near the graph's placement.
+    std::vector<Eigen::Vector2d> centre(working.size());
+    for (int i = 0; i < n; ++i)
+      centre[i] = apply(working[i].en_from_px, 0.5 * working[i].size_px.width, 0.5 * working[i].size_px.height) - origin;
+    std::vector<double> tie_weight;  // 1 / sigma^2 per pair
+    for (const ImagePairTies& p : out.pairs) {
+      const double sigma_m = (p.same_image ? kSameImageSigmaPx : config.tie_sigma_px) *
+                             std::min(working[p.a].gsd_m, working[p.b].gsd_m);
+      tie_weight.push_back(1.0 / (sigma_m * sigma_m));
+      out.ties += static_cast<int>(p.on_a_en_m.size());
+    }
+    std::vector<std::vector<double>> huber(out.pairs.size());
+    for (std::size_t k = 0; k < out.pairs.size(); ++k) huber[k].assign(out.pairs[k].on_a_en_m.size(), 1.0);
+    const double prior[4] = {1.0 / (config.prior_sigma_m * config.prior_sigma_m),
+                             1.0 / (config.prior_sigma_m * config.prior_sigma_m),
+                             1.0 / (config.rotation_prior_sigma_rad * config.rotation_prior_sigma_rad),
+                             1.0 / (config.scale_prior_sigma * config.scale_prior_sigma)};
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(4 * n);
+    const auto residual = [&](const ImagePairTies& p, std::size_t t) {
+      const Eigen::Vector2d xa = p.on_a_en_m[t] - origin, xb = p.on_b_en_m[t] - origin;
+      return Eigen::Vector2d(xa + moveJacobian(xa, centre[p.a]) * u.segment<4>(4 * p.a) - xb -
+                             moveJacobian(xb, centre[p.b]) * u.segment<4>(4 * p.b));
+    };
+    // Rounds: the robust solution, then the pairs whose ties still disagree by more than max_pair_rms_px left out (a
+    // pair of wrong ties that agree with one another: low texture, repetitive ground) and the rest solved again.
+    const auto pairRmsPx = [&](const ImagePairTies& p) {
+      double sum2 = 0;
+      for (std::size_t t = 0; t < p.on_a_en_m.size(); ++t) sum2 += residual(p, t).squaredNorm();
+      return std::sqrt(sum2 / p.on_a_en_m.size()) / std::min(working[p.a].gsd_m, working[p.b].gsd_m);
+    };
+    for (int round = 0; round < 4; ++round) {
+      for (int iteration = 0; iteration < 8; ++iteration) {
+        std::vector<Eigen::Triplet<double>> triplets;
+        Eigen::VectorXd rhs = Eigen::VectorXd::Zero(4 * n);
+        for (int i = 0; i < n; ++i)
+          for (int c = 0; c < 4; ++c) {
+            triplets.emplace_back(4 * i + c, 4 * i + c, prior[c]);
+            rhs[4 * i + c] -= prior[c] * u_total[4 * i + c];  // the priors hold the sum of the passes' moves
+          }
+        for (std::size_t k = 0; k < out.pairs.size(); ++k) {
+          const ImagePairTies& p = out.pairs[k];
+          if (p.rejected) continue;
+          Eigen::Matrix4d aa = Eigen::Matrix4d::Zero(), ab = Eigen::Matrix4d::Zero(), bb = Eigen::Matrix4d::Zero();
+          Eigen::Vector4d ra = Eigen::Vector4d::Zero(), rb = Eigen::Vector4d::Zero();
+          for (std::size_t t = 0; t < p.on_a_en_m.size(); ++t) {
+            const Eigen::Vector2d xa = p.on_a_en_m[t] - origin, xb = p.on_b_en_m[t] - origin;
+            const Eigen::Matrix<double, 2, 4> ja = moveJacobian(xa, centre[p.a]), jb = -moveJacobian(xb, centre[p.b]);
+            const Eigen::Vector2d e0 = xa - xb;
+            const double w = tie_weight[k] * huber[k][t];
+            aa += w * ja.transpose() * ja;
+            ab += w * ja.transpose() * jb;
+            bb += w * jb.transpose() * jb;
+            ra -= w * ja.transpose() * e0;
+            rb -= w * jb.transpose() * e0;
+          }
+          for (int r = 0; r < 4; ++r)
+            for (int c = 0; c < 4; ++c) {
+              triplets.emplace_back(4 * p.a + r, 4 * p.a + c, aa(r, c));
+              triplets.emplace_back(4 * p.b + r, 4 * p.b + c, bb(r, c));
+              triplets.emplace_back(4 * p.a + r, 4 * p.b + c, ab(r, c));
+              triplets.emplace_back(4 * p.b + c, 4 * p.a + r, ab(r, c));
+            }
+          rhs.segment<4>(4 * p.a) += ra;
+          rhs.segment<4>(4 * p.b) += rb;
+        }
+        Eigen::SparseMatrix<double> normal(4 * n, 4 * n);
+        normal.setFromTriplets(triplets.begin(), triplets.end());
+        Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(normal);
+        if (solver.info() != Eigen::Success) {
+          out.problem = "the normal equations could not be factored";
+          return out;
+        }
+        u = solver.solve(rhs);
+        bool changed = false;
+        for (std::size_t k = 0; k < out.pairs.size(); ++k)
+          for (std::size_t t = 0; t < huber[k].size() && !out.pairs[k].rejected && !out.pairs[k].same_image; ++t) {
+            const double e = residual(out.pairs[k], t).norm() * std::sqrt(tie_weight[k]);
+            const double h = e > config.huber_sigmas ? config.huber_sigmas / e : 1.0;
+            changed = changed || std::abs(h - huber[k][t]) > 1e-3;
+            huber[k][t] = h;
+          }
+        if (!changed) break;
       }
-    if (!changed) break;
+      int rejected = 0;
+      for (ImagePairTies& p : out.pairs)
+        if (!p.rejected && !p.same_image && pairRmsPx(p) > config.max_pair_rms_px) p.rejected = true, ++rejected;
+      out.pairs_rejected += rejected;
+      if (rejected == 0) break;
+    }
+    // This pass's moves, composed onto the drawings the next pass measures.
+    const cv::Matx33d to_local(1, 0, -origin.x(), 0, 1, -origin.y(), 0, 0, 1);
+    const cv::Matx33d to_en(1, 0, origin.x(), 0, 1, origin.y(), 0, 0, 1);
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector4d v = u.segment<4>(4 * i);
+      // x' = (1 + s) x + theta J x + t - (theta J + s I) c, in the local frame
+      const Eigen::Vector2d c = centre[i];
+      const cv::Matx33d local(1 + v[3], -v[2], v[0] + v[2] * c.y() - v[3] * c.x(),  //
+                              v[2], 1 + v[3], v[1] - v[2] * c.x() - v[3] * c.y(),  //
+                              0, 0, 1);
+      const cv::Matx33d move = to_en * local * to_local;
+      out.move_en[i] = move * out.move_en[i];
+      working[i].en_from_px = move * working[i].en_from_px;
+    }
+    u_total += u;
+    for (ImagePairTies& p : out.pairs) {
+      p.after_px = pairRmsPx(p);
+      const auto first = first_before_px.find({p.a, p.b});
+      if (first == first_before_px.end())
+        first_before_px[{p.a, p.b}] = p.before_px;
+      else
+        p.before_px = first->second;  // as the graph placed them
+    }
   }
-  const cv::Matx33d to_local(1, 0, -origin.x(), 0, 1, -origin.y(), 0, 0, 1);
-  const cv::Matx33d to_en(1, 0, origin.x(), 0, 1, origin.y(), 0, 0, 1);
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector4d v = u.segment<4>(4 * i);
-    out.shift_en_m[i] = v.head<2>();
-    out.rotation_rad[i] = v[2];
-    out.scale_change[i] = v[3];
-    // x' = (1 + s) x + theta J x + t - (theta J + s I) c, in the local frame
-    const Eigen::Vector2d c = centre[i];
-    const cv::Matx33d local(1 + v[3], -v[2], v[0] + v[2] * c.y() - v[3] * c.x(),  //
-                            v[2], 1 + v[3], v[1] - v[2] * c.x() - v[3] * c.y(),  //
-                            0, 0, 1);
-    out.move_en[i] = to_en * local * to_local;
+    const cv::Matx33d& m = out.move_en[i];
+    const Eigen::Vector2d c = apply(images[i].en_from_px, 0.5 * images[i].size_px.width, 0.5 * images[i].size_px.height);
+    out.shift_en_m[i] = apply(m, c.x(), c.y()) - c;
+    out.rotation_rad[i] = std::atan2(m(1, 0), m(0, 0));
+    out.scale_change[i] = std::sqrt(m(0, 0) * m(1, 1) - m(0, 1) * m(1, 0)) - 1.0;
     out.shift_max_m = std::max(out.shift_max_m, out.shift_en_m[i].norm());
-    out.rotation_max_rad = std::max(out.rotation_max_rad, std::abs(v[2]));
+    out.rotation_max_rad = std::max(out.rotation_max_rad, std::abs(out.rotation_rad[i]));
   }
-  for (ImagePairTies& p : out.pairs) {
-    const double gsd_m = std::min(images[p.a].gsd_m, images[p.b].gsd_m);
-    double sum2 = 0;
-    for (std::size_t t = 0; t < p.on_a_en_m.size(); ++t) sum2 += residual(p, t).squaredNorm();
-    p.after_px = std::sqrt(sum2 / p.on_a_en_m.size()) / gsd_m;
-    if (!p.cross_pass) continue;
+  for (const ImagePairTies& p : out.pairs) {
+    if (!p.cross_pass || p.rejected) continue;
     out.cross_before_max_px = std::max(out.cross_before_max_px, p.before_px);
     out.cross_after_max_px = std::max(out.cross_after_max_px, p.after_px);
   }

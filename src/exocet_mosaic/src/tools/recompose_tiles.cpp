@@ -172,6 +172,15 @@ int main(int argc, char** argv) {
   app.add_option("--image-scale-sigma", image_adjustment_config.scale_prior_sigma,
                  "with --image-adjustment: how much an image's scale may change (1-sigma), (0, 1]")
       ->capture_default_str();
+  app.add_option("--image-patch-px", image_adjustment_config.patch_px,
+                 "with --image-ties patches: side of a patch (px), [16, 512]")
+      ->capture_default_str();
+  app.add_option("--image-min-ties", image_adjustment_config.min_ties,
+                 "with --image-adjustment: tie points a pair of images needs, [3, 100000]")
+      ->capture_default_str();
+  app.add_option("--image-min-response", image_adjustment_config.min_response,
+                 "with --image-ties patches: phase correlation peak a patch needs, [0, 1]")
+      ->capture_default_str();
   app.add_option("--image-search-radius-px", image_adjustment_config.search_radius_px,
                  "with --image-adjustment: how far (image px) a tie point may be from where the graph's placements "
                  "put it, (0, 200]")
@@ -316,6 +325,7 @@ int main(int argc, char** argv) {
         const et::RecordedImage& image = records[k].images[i];
         et::AdjustableImage a;
         a.id = image.file + " in tile " + std::to_string(records[k].index);
+        a.source = image.file;
         a.stamp_s = image.stamp_s;
         a.en_from_px = en_from_ground * placements[k][i];
         a.size_px = cv::Size(image.width_px, image.height_px);
@@ -347,9 +357,9 @@ int main(int argc, char** argv) {
       int cross = 0;
       for (const et::ImagePairTies& p : solved.pairs) cross += p.cross_pass ? 1 : 0;
       std::printf("recompose_tiles: images adjusted: %zu images, %zu pairs measured (%d across passes) of %d tried, "
-                  "%d tie points; across passes the largest RMS disagreement %.2f px before, %.2f px left; images moved "
+                  "%d left out, %d tie points; across passes the largest RMS disagreement %.2f px before, %.2f px left; images moved "
                   "by up to %.4f m and %.2f mrad\n",
-                  images.size(), solved.pairs.size(), cross, solved.pairs_tried, solved.ties,
+                  images.size(), solved.pairs.size(), cross, solved.pairs_tried, solved.pairs_rejected, solved.ties,
                   solved.cross_before_max_px, solved.cross_after_max_px, solved.shift_max_m,
                   1e3 * solved.rotation_max_rad);
       image_adjustment_json = {{"done", true},
@@ -357,6 +367,7 @@ int main(int argc, char** argv) {
                                {"images_with_features", solved.images_with_features},
                                {"pairs_tried", solved.pairs_tried},
                                {"pairs", solved.pairs.size()},
+                               {"pairs_rejected", solved.pairs_rejected},
                                {"cross_pass_pairs", cross},
                                {"tie_points", solved.ties},
                                {"cross_pass_rms_max_px_before", solved.cross_before_max_px},
@@ -371,7 +382,9 @@ int main(int argc, char** argv) {
                          {"matches", p.matches},
                          {"ties", p.on_a_en_m.size()},
                          {"rms_before_px", p.before_px},
-                         {"rms_after_px", p.after_px}});
+                         {"rms_after_px", p.after_px},
+                         {"rejected", p.rejected},
+                         {"same_image", p.same_image}});
       for (std::size_t i = 0; i < images.size(); ++i)
         shifts[images[i].id] = {{"shift_en_m", {solved.shift_en_m[i].x(), solved.shift_en_m[i].y()}},
                                 {"rotation_rad", solved.rotation_rad[i]},

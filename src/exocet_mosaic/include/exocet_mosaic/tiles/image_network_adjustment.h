@@ -26,7 +26,10 @@ namespace tiles {
 
 /// One image as placed on the ground.
 struct AdjustableImage {
-  std::string id;                                ///< unique (the kept image's file name)
+  std::string id;                                ///< unique
+  /// The image's pixels (a file name): one image drawn in two tiles is given twice, once per tile with that tile's
+  /// placement, with one source; the adjustment brings its two drawings together. Empty: the id.
+  std::string source;
   double stamp_s = 0;                            ///< its time in the dive: orders the passes
   cv::Matx33d en_from_px = cv::Matx33d::eye();   ///< image px -> (E, N) in metres, one frame for every image
   cv::Size size_px;                              ///< the image's size
@@ -39,7 +42,9 @@ struct ImageAdjustmentConfig {
   /// each one's offset by phase correlation (area-based: sub-pixel and not drawn by the lighting); "sift", SIFT
   /// keypoints matched where the placements predict them (feature-based).
   std::string tie_method = "patches";
-  int patch_px = 64;          ///< with "patches": side of a patch (px of the finer image), [16, 512]
+  /// With "patches": side of a patch (px of the finer image), [16, 512]. Small: each patch a local tie; 128 left the
+  /// sample out-and-back dive's recomposed tiles 1.9 px apart, 48 0.5 px.
+  int patch_px = 48;
   double min_response = 0.2;  ///< with "patches": phase correlation peak a patch needs, [0, 1]
   int cached_images = 256;    ///< with "patches": images kept in memory while the pairs are measured, [2, 100000]
   int max_features = 2000;  ///< with "sift": keypoints per image, [50, 20000]
@@ -70,11 +75,18 @@ struct ImageAdjustmentConfig {
   double rotation_prior_sigma_rad = 0.02;  ///< prior 1-sigma of an image's rotation, (0, 1]
   double scale_prior_sigma = 0.05;         ///< and of its scale change, (0, 1]
   /// Prior 1-sigma of an image's shift from the pose graph's placement (m), (0, 100]. The ties cannot tell a change of
-  /// every image's scale about its centre from a shrinking of the whole map; this prior, tight against the scale's,
-  /// makes the first one win: the graph places the images' centres, the ties their edges. (With 0.05 m the PAL
-  /// bench dive's map shrank by 1.5 %, its landmarks off by up to 0.14 m.)
-  double prior_sigma_m = 0.01;
+  /// every image's scale about its centre from a shrinking of a group of images or the whole map; this prior, tight
+  /// against the scale's, makes the first one win: the graph places the images' centres, the ties their edges and
+  /// orientation. (With 0.05 m the PAL bench dive's map shrank by 1.5 %, its landmarks off by up to 0.14 m; with
+  /// 0.01 m they were still 1-2 cm further off than without the adjustment.)
+  double prior_sigma_m = 0.003;
   double huber_sigmas = 3.0;  ///< ties whose residual exceeds this many sigmas weigh less (Huber), (0, 100]
+  /// A pair whose ties still disagree by more than this (RMS, px) after the solution is left out and the rest solved
+  /// again (at most 3 times), (0, 100].
+  double max_pair_rms_px = 2.0;
+  /// Measure-and-solve passes, each on the drawings the previous one moved, [1, 10]: a patch's phase correlation reads
+  /// a large offset short by a fraction of it (2 px read as 1.6 on the gtest's ortho-image).
+  int passes = 2;
   /// Empty if usable, otherwise every bad field with its allowed range, separated by "; ".
   std::string validate() const;
 };
@@ -87,8 +99,11 @@ struct ImagePairTies {
   /// each on the ground (E, N in metres) before the adjustment.
   std::vector<Eigen::Vector2d> on_a_en_m, on_b_en_m;
   int matches = 0;          ///< raw ties (mutual matches, correlated patches) before RANSAC
-  double before_px = 0;     ///< RMS of the ties' disagreement before, px of the finer image
-  double after_px = 0;      ///< and after the adjustment
+  double before_px = 0;     ///< RMS of the ties' disagreement at the graph's placements, px of the finer image
+  double after_px = 0;      ///< and after the adjustment (the last pass's ties)
+  bool rejected = false;    ///< left out of the solution (after_px beyond max_pair_rms_px)
+  /// Two drawings of one image (same source): ties at a grid of its pixels, held tight (0.05 px), never left out.
+  bool same_image = false;
 };
 
 /// What adjustImages() found.
@@ -101,8 +116,9 @@ struct ImageAdjustment {
   std::vector<ImagePairTies> pairs;  ///< every pair measured
   int images_with_features = 0;  ///< images read (and, with "sift", with keypoints)
   int pairs_tried = 0;
+  int pairs_rejected = 0;
   int ties = 0;
-  /// Largest RMS disagreement of a cross-pass pair before and after, px (0 without such pairs).
+  /// Largest RMS disagreement of a cross-pass pair (not rejected) before and after, px (0 without such pairs).
   double cross_before_max_px = 0, cross_after_max_px = 0;
   double shift_max_m = 0;
   double rotation_max_rad = 0;
