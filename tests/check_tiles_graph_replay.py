@@ -7,7 +7,7 @@ checker plays the bag, flushes the tile writer, waits until no tile has been wri
 /mosaic/tile), every pair of overlapping tiles, consecutive or return pass, agrees within 2 px, and their mean
 levels on their common pixels within 3 grey levels (the images' gains, solved over their overlaps). Then the dive is
 drawn again after it (`recompose_tiles`, per image at the graph's final corrections): every overlapping pair of the
-recomposed tiles agrees within 1.5 px, and in level within 3 grey levels.
+recomposed tiles agrees within 1.2 px, and in level within 3 grey levels.
 """
 import atexit
 import os
@@ -26,9 +26,10 @@ from exocet_mosaic import tile_analysis
 
 MAX_PAIR_PX = 2.0  # issue 20: every pair of overlapping live tiles, return passes included
 MAX_LEVEL_STEP_GREY = 3.0  # issue 20: mean-level difference between overlapping tiles
-# Every overlapping pair after the dive, recomposed from the final graph: issue 20's target is 1 px (bench_tiles
-# reports it); on this dive the recomposed pairs measured 0.3 to 0.98 px over the runs of this test.
-MAX_RECOMPOSED_PAIR_PX = 1.5
+# Every overlapping pair after the dive, recomposed from the final graph with the images adjusted to one another.
+# Issue 20's target is 1 px; bench_tiles reports it on the bench dives. On this dive the recomposed pairs measured
+# 0.52 and 0.77 px in two runs of this test (the live run differs each time): the bound leaves that spread room.
+MAX_RECOMPOSED_PAIR_PX = 1.2
 
 
 class TilesGraphReplayTest(unittest.TestCase):

@@ -453,6 +453,11 @@ BENCHMARKS = {
             'per tile (`recomposed_tile_gains_*`, `compose::JointTileGains`) and with OpenCV\'s stitcher\'s '
             'per-image, per-channel compensator (`recomposed_opencv_gains_*`, `cv::detail::ChannelsCompensator` on the '
             'lighting-corrected images warped at 4 GSD).',
+            'Recomposition: `recompose_tiles` draws each image at the graph\'s final corrections, then moves each '
+            'by a small similarity that brings it into agreement with the images it overlaps '
+            '(`tiles::adjustImages`: tie points by phase correlation of 48 px patches of each pair drawn on their '
+            'common ground, RANSAC, robust sparse least squares, two passes); `recomposed_graph_only_*`: the same '
+            'drawing without that adjustment.',
             'Graph modes: each dive is replayed with `pose_graph:=false` then `pose_graph:=true` (`--graph-modes`); '
             'the figures of the run with the graph have the plain names, those of the run without it the suffix '
             '`_without_graph`. `rate_no_drop` (top level `<dive>_rate_no_drop`): the replay rate at which no frame '
@@ -546,6 +551,15 @@ BENCHMARKS = {
                                             'every overlapping pair misaligned, max (px; target <= 1)'),
             ('*_recomposed_landmark_p95_m', 'recomposed after the dive: landmark error, p95 (m; target <= half the '
                                             'live figure)'),
+            ('*_recomposed_graph_only_overlap_max_px', 'recomposed at the graph\'s placements only '
+                                                       '(--no-image-adjustment): every overlapping pair, max (px)'),
+            ('*_recomposed_graph_only_landmark_p95_m', 'recomposed at the graph\'s placements only: landmark error, '
+                                                       'p95 (m)'),
+            ('recomposed_graph_only_*', 'recomposed at the graph\'s placements only (recompose_tiles '
+                                        '--no-image-adjustment)'),
+            ('recomposed_image_adjustment_*', 'recompose_tiles\' adjustment of the images to one another: pairs '
+                                              'measured, left out, largest cross-pass RMS disagreement before and '
+                                              'after (px), largest move (m, rad)'),
             ('*_recomposed_graph_sigma_m', 'recomposed after the dive: the pose graph\'s own radial 1-sigma '
                                            '(sqrt(sigma_E^2 + sigma_N^2)) at the landmarks, median (m)'),
             ('*_recomposed_landmarks_within_graph_sigma', 'recomposed after the dive: landmarks whose error is within '

@@ -5,9 +5,9 @@
 // With --tile-adjustment the tiles so drawn are first registered with each other and each moved by one similarity
 // (tile_network_adjustment.h, what adjust_tiles does); not by default: on the PAL and grid bench dives and the sample
 // out-and-back dive the overlapping pairs agree better without it (PAL every pair 0.87-1.14 px against 1.13-1.21).
-// Then the images themselves are moved into agreement where they overlap, return passes and crossings included: tie
-// points between overlapping images, one ground shift per image (image_network_adjustment.h; --no-image-adjustment:
-// the graph's placements as they are).
+// Then the images themselves are moved into agreement where they overlap, return passes, turns and crossings
+// included: tie points between overlapping images, one small similarity per image (image_network_adjustment.h;
+// --no-image-adjustment: the graph's placements as they are).
 // Reads the records the tile writer keeps (<tiles>/.exocet_images/) and the last graph corrections it received
 // (graph_corrections.csv there, or --corrections). The live tiles are kept.
 //   rosrun exocet_mosaic recompose_tiles --tiles DIR --output DIR [--corrections FILE.csv] [--report FILE.json]
