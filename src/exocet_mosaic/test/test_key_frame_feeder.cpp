@@ -228,6 +228,70 @@ TEST(KeyFrameFeeder, AOneSecondGapDoesNotLetTheRestFloatOnTheFixes) {
   EXPECT_LT(worst_m, 0.06);
 }
 
+TEST(KeyFrameFeeder, TheDeadReckoningAnchorsTheGraphAndTiesItsKeyFrames) {
+  // A straight track at 0.5 m/s heading north; exact image motions; USBL fixes 0.3 m east of the track all dive (the
+  // average of a minute of 0.5 m fixes is off by about that much over short stretches); the dead reckoning at 5 Hz,
+  // 1 cm east of the truth (its launch error), half a second behind the images, with a 3 s gap. The graph takes
+  // the dead reckoning's start; the key frames in the gap have no tie. Without the dead reckoning the fixes alone
+  // place it.
+  for (const bool with_dr : {true, false}) {
+  BackgroundPoseGraph graph(quietGraph());
+  KeyFrameFeeder feeder(KeyFrameFeederConfig(), &graph);
+  const Eigen::Vector2d velocity(0.0, 0.5), launch_error(0.01, 0.0), usbl_bias(0.3, 0.0);
+  const double yaw = M_PI / 2;
+  const auto dr = [&](double t) {
+    if (with_dr && (t < 30.0 || t > 33.0)) feeder.addDeadReckoning(t, velocity * t + launch_error, Eigen::Matrix2d::Identity() * 1e-4);
+  };
+  for (int j = -5; j <= 0; ++j) dr(0.2 * j);
+  feeder.start(0.0, Eigen::Vector2d(0.05, -0.05), yaw);
+  int next_dr = 1;
+  for (int i = 1; i <= 600; ++i) {
+    const double t = 0.1 * i;
+    if (i % 10 == 0)
+      feeder.addPositionFix(t, velocity * t + usbl_bias, Eigen::Matrix2d::Identity() * 0.25);
+    feeder.addImageMotion(t, velocity * 0.1, Eigen::Matrix2d::Identity() * 1e-8, 0.0, yaw, 0.01);
+    for (; 0.2 * next_dr <= t - 0.5; ++next_dr) dr(0.2 * next_dr);
+  }
+  for (; 0.2 * next_dr <= 61.0; ++next_dr) dr(0.2 * next_dr);
+  ASSERT_TRUE(graph.waitIdle(60.0));
+  const auto snapshot = graph.snapshot();
+  ASSERT_TRUE(snapshot->last_error.empty()) << snapshot->last_error;
+  const double start_error_m = (snapshot->key_frames.front().pose.position_en_m - Eigen::Vector2d::Zero()).norm();
+  double worst_m = 0;
+  for (const KeyFramePose& k : snapshot->key_frames)
+    worst_m = std::max(worst_m, (k.pose.position_en_m - velocity * k.stamp_s).norm());
+  std::printf("%s the dead reckoning: graph off the track by %.4f m at the start, %.4f m at most\n",
+              with_dr ? "with" : "without", start_error_m, worst_m);
+  if (!with_dr) {
+    EXPECT_FALSE(feeder.deadReckoningAnchored());
+    EXPECT_EQ(feeder.deadReckoningFactors(), 0);
+    EXPECT_GT(start_error_m, 0.2) << "the fixes' bias";
+    continue;
+  }
+  // The anchor's own error (the launch, 1 cm east) plus the fixes' pull on it (0.3 m with the weight of 60 fixes of
+  // 0.5 m, 240 m^-2, against the anchor's 10000 m^-2: 7 mm): 1.7 cm; the fixes alone: 0.3 m.
+  EXPECT_LT(start_error_m, 0.02);
+  // Further on, the image odometry's floor (2 mm per key frame) lets the track lean towards the fixes.
+  EXPECT_LT(worst_m, 0.08);
+  EXPECT_TRUE(feeder.deadReckoningAnchored());
+  int64_t with_position = 0, in_gap = 0;
+  for (const FeederKeyFrame& k : feeder.keyFrames()) {
+    const bool gap = k.stamp_s > 29.8 && k.stamp_s < 33.2;
+    if (gap) {
+      ++in_gap;
+      EXPECT_FALSE(k.dead_reckoning_en_m) << "key frame at " << k.stamp_s << " s";
+    } else {
+      ASSERT_TRUE(k.dead_reckoning_en_m) << "key frame at " << k.stamp_s << " s";
+      EXPECT_LT((*k.dead_reckoning_en_m - velocity * k.stamp_s - launch_error).norm(), 1e-9);
+      ++with_position;
+    }
+  }
+  EXPECT_GT(in_gap, 0);
+  // Every key frame with a position is tied to the one before it, except the first and the first after the gap.
+  EXPECT_EQ(feeder.deadReckoningFactors(), with_position - 2);
+  }
+}
+
 TEST(KeyFrameFeeder, BadInputIsRefusedWithItsName) {
   BackgroundPoseGraph graph(quietGraph());
   KeyFrameFeederConfig bad;
@@ -254,6 +318,14 @@ TEST(KeyFrameFeeder, BadInputIsRefusedWithItsName) {
   }
   EXPECT_THROW(feeder.addPositionFix(2.0, Eigen::Vector2d(0, std::nan("")), Eigen::Matrix2d::Identity()),
                std::invalid_argument);
+  EXPECT_THROW(feeder.addDeadReckoning(2.0, Eigen::Vector2d(0, std::nan("")), Eigen::Matrix2d::Identity()),
+               std::invalid_argument);
+  EXPECT_THROW(feeder.addDeadReckoning(2.0, Eigen::Vector2d(0, 0), Eigen::Matrix2d::Zero()), std::invalid_argument);
+  KeyFrameFeederConfig bad_dr;
+  bad_dr.dr_max_gap_s = 0.0;
+  bad_dr.dr_noise_m2_per_m = -1.0;
+  EXPECT_NE(bad_dr.validate().find("dr_max_gap_s"), std::string::npos);
+  EXPECT_NE(bad_dr.validate().find("dr_noise_m2_per_m"), std::string::npos);
 }
 
 }  // namespace

@@ -96,14 +96,29 @@ void BackgroundPoseGraph::addOdometry(int64_t from_id, int64_t to_id, const Rela
   wake_.notify_one();
 }
 
+void BackgroundPoseGraph::addRelativePosition(int64_t from_id, int64_t to_id, const Eigen::Vector2d& translation_m,
+                                              const Eigen::Matrix2d& covariance_m2) {
+  const std::string what = "addRelativePosition " + std::to_string(from_id) + " -> " + std::to_string(to_id);
+  if (!(from_id < to_id)) throw std::invalid_argument(what + ": from id not before to id");
+  if (!translation_m.allFinite()) throw std::invalid_argument(what + ": non-finite translation");
+  whiteningOf(covariance_m2, what + " covariance_m2");
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const int64_t id : {from_id, to_id})
+      if (!knownId(id)) throw std::invalid_argument(what + ": unknown key frame id " + std::to_string(id));
+    push(RelativePositionInput{from_id, to_id, translation_m, covariance_m2});
+  }
+  wake_.notify_one();
+}
+
 void BackgroundPoseGraph::addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m,
-                                         const Eigen::Matrix2d& covariance_m2) {
+                                         const Eigen::Matrix2d& covariance_m2, bool robust) {
   if (!std::isfinite(stamp_s) || !position_en_m.allFinite())
     throw std::invalid_argument("addPositionFix: non-finite stamp or position");
   whiteningOf(covariance_m2, "addPositionFix covariance_m2");
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    push(FixInput{stamp_s, position_en_m, covariance_m2});
+    push(FixInput{stamp_s, position_en_m, covariance_m2, robust});
   }
   wake_.notify_one();
 }
@@ -252,8 +267,10 @@ void BackgroundPoseGraph::run() {
                   graph_.addKeyFrame(in.id, in.stamp_s, in.pose);
                 } else if constexpr (std::is_same_v<T, OdometryInput>) {
                   graph_.addOdometry(in.from_id, in.to_id, in.delta, in.covariance);
+                } else if constexpr (std::is_same_v<T, RelativePositionInput>) {
+                  graph_.addRelativePosition(in.from_id, in.to_id, in.translation_m, in.covariance_m2);
                 } else if constexpr (std::is_same_v<T, FixInput>) {
-                  graph_.addPositionFix(in.stamp_s, in.position_en_m, in.covariance_m2);
+                  graph_.addPositionFix(in.stamp_s, in.position_en_m, in.covariance_m2, in.robust);
                 } else if constexpr (std::is_same_v<T, HeadingInput>) {
                   graph_.addHeading(in.id, in.yaw_rad, in.sigma_rad);
                 } else {

@@ -1,6 +1,8 @@
 #include "exocet_mosaic/graph/key_frame_feeder.h"
 
+#include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <sstream>
 #include <stdexcept>
 
@@ -38,6 +40,14 @@ std::string KeyFrameFeederConfig::validate() const {
     e << "gap_drift_mps = " << gap_drift_mps << " outside [0, 100] m/s; ";
   if (!(gap_yaw_sigma_rad > 0.0 && gap_yaw_sigma_rad <= 10.0))
     e << "gap_yaw_sigma_rad = " << gap_yaw_sigma_rad << " outside (0, 10] rad; ";
+  if (!(dr_measurement_sigma_m > 0.0 && dr_measurement_sigma_m <= 100.0))
+    e << "dr_measurement_sigma_m = " << dr_measurement_sigma_m << " outside (0, 100] m; ";
+  if (!(dr_noise_m2_per_m >= 0.0 && dr_noise_m2_per_m <= 100.0))
+    e << "dr_noise_m2_per_m = " << dr_noise_m2_per_m << " outside [0, 100] m^2/m; ";
+  if (!(dr_noise_m2_per_s >= 0.0 && dr_noise_m2_per_s <= 100.0))
+    e << "dr_noise_m2_per_s = " << dr_noise_m2_per_s << " outside [0, 100] m^2/s; ";
+  if (!(dr_max_gap_s > 0.0 && dr_max_gap_s <= 3600.0))
+    e << "dr_max_gap_s = " << dr_max_gap_s << " outside (0, 3600] s; ";
   std::string text = e.str();
   if (text.size() >= 2) text.resize(text.size() - 2);
   return text;
@@ -61,6 +71,7 @@ int64_t KeyFrameFeeder::start(double stamp_s, const Eigen::Vector2d& camera_en_m
   graph_->addKeyFrame(k.id, k.stamp_s, k.initial);
   key_frames_.push_back(k);
   last_stamp_s_ = stamp_s;
+  if (!placeByDeadReckoning(0)) awaiting_dr_.push_back(0);
   return k.id;
 }
 
@@ -118,6 +129,7 @@ int64_t KeyFrameFeeder::makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odom
   graph_->addOdometry(a.id, b.id, delta, odometry_covariance);
   if (sensor_yaw_rad && sensor_yaw_sigma_rad > 0.0) graph_->addHeading(b.id, *sensor_yaw_rad, sensor_yaw_sigma_rad);
   key_frames_.push_back(b);
+  if (!placeByDeadReckoning(key_frames_.size() - 1)) awaiting_dr_.push_back(key_frames_.size() - 1);
   displacement_en_m_.setZero();
   covariance_m2_.setZero();
   yaw_change_rad_ = 0.0;
@@ -143,10 +155,63 @@ int64_t KeyFrameFeeder::addImageFailure(double stamp_s, const Eigen::Vector2d& f
   return makeKeyFrame(stamp_s, covariance, std::nullopt, 0.0);
 }
 
+void KeyFrameFeeder::addDeadReckoning(double stamp_s, const Eigen::Vector2d& camera_en_m,
+                                      const Eigen::Matrix2d& covariance_m2) {
+  requireFinite(std::isfinite(stamp_s) && camera_en_m.allFinite() && covariance_m2.allFinite(), "a dead reckoning");
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(0.5 * (covariance_m2 + covariance_m2.transpose()));
+  if (!(eigen.eigenvalues().minCoeff() > 0.0))
+    throw std::invalid_argument("key-frame feeder: a dead reckoning's covariance is not positive definite");
+  // Out of order or repeated: left out, so that the samples stay in order.
+  if (!dr_samples_.empty() && !(stamp_s > dr_samples_.back().stamp_s)) return;
+  dr_samples_.push_back(DeadReckoningSample{stamp_s, camera_en_m, 0.5 * (covariance_m2 + covariance_m2.transpose())});
+  while (dr_samples_.size() > kDeadReckoningHistoryMax ||
+         (dr_samples_.size() > 2 && dr_samples_.front().stamp_s < stamp_s - kDeadReckoningHistoryS))
+    dr_samples_.pop_front();
+  std::vector<size_t> waiting;
+  for (const size_t index : awaiting_dr_)
+    if (!placeByDeadReckoning(index)) waiting.push_back(index);
+  awaiting_dr_.swap(waiting);
+}
+
+bool KeyFrameFeeder::placeByDeadReckoning(size_t index) {
+  const double t = key_frames_[index].stamp_s;
+  if (dr_samples_.empty() || dr_samples_.back().stamp_s < t) return false;  // the sample after it is still to come
+  const auto after = std::lower_bound(dr_samples_.begin(), dr_samples_.end(), t,
+                                      [](const DeadReckoningSample& s, double v) { return s.stamp_s < v; });
+  if (after->stamp_s > t && after == dr_samples_.begin()) return true;  // no sample before it: it has no position
+  const DeadReckoningSample& b = *after;
+  const DeadReckoningSample& a = after->stamp_s > t ? *std::prev(after) : b;
+  if (b.stamp_s - a.stamp_s > config_.dr_max_gap_s) return true;  // a gap in the dead reckoning
+  const double w = b.stamp_s > a.stamp_s ? (t - a.stamp_s) / (b.stamp_s - a.stamp_s) : 0.0;
+  key_frames_[index].dead_reckoning_en_m = (1.0 - w) * a.camera_en_m + w * b.camera_en_m;
+  tieByDeadReckoning(index, (1.0 - w) * a.covariance_m2 + w * b.covariance_m2);
+  return true;
+}
+
+void KeyFrameFeeder::tieByDeadReckoning(size_t index, const Eigen::Matrix2d& covariance_m2) {
+  const FeederKeyFrame& b = key_frames_[index];
+  if (!dr_anchored_) {
+    // Where the dead reckoning started the dive, as it knows it (its launch point's error): a prior on the graph's
+    // absolute position, which the later samples, correlated with it, do not repeat.
+    graph_->addPositionFix(b.stamp_s, *b.dead_reckoning_en_m, covariance_m2, false);
+    dr_anchored_ = true;
+    return;
+  }
+  if (index == 0 || !key_frames_[index - 1].dead_reckoning_en_m) return;  // the one before has none: no tie
+  const FeederKeyFrame& a = key_frames_[index - 1];
+  const Eigen::Vector2d displacement = *b.dead_reckoning_en_m - *a.dead_reckoning_en_m;
+  const double variance = 2.0 * config_.dr_measurement_sigma_m * config_.dr_measurement_sigma_m +
+                          config_.dr_noise_m2_per_m * displacement.norm() +
+                          config_.dr_noise_m2_per_s * std::max(0.0, b.stamp_s - a.stamp_s);
+  graph_->addRelativePosition(a.id, b.id, rotation(-a.initial.yaw_rad) * displacement,
+                              Eigen::Matrix2d::Identity() * variance);
+  ++dr_factors_;
+}
+
 void KeyFrameFeeder::addPositionFix(double stamp_s, const Eigen::Vector2d& camera_en_m,
-                                    const Eigen::Matrix2d& covariance_m2) {
+                                    const Eigen::Matrix2d& covariance_m2, bool robust) {
   requireFinite(std::isfinite(stamp_s) && camera_en_m.allFinite() && covariance_m2.allFinite(), "a position fix");
-  graph_->addPositionFix(stamp_s, camera_en_m, covariance_m2);
+  graph_->addPositionFix(stamp_s, camera_en_m, covariance_m2, robust);
 }
 
 }  // namespace graph

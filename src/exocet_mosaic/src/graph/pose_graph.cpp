@@ -51,6 +51,19 @@ struct OdometryResidual {
   }
 };
 
+/// W [R(-yaw_a) (p_b - p_a) - t]: the translation of the odometry's error alone.
+struct RelativePositionResidual {
+  Eigen::Vector3d measured;  ///< (tx, ty, 0)
+  Eigen::Matrix2d whitening;
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* r) const {
+    const Eigen::Matrix<T, 3, 1> e = relativeError(a, b, measured);
+    Eigen::Map<Eigen::Matrix<T, 2, 1>> out(r);
+    out = whitening.cast<T>() * e.template head<2>();
+    return true;
+  }
+};
+
 /// [s W e; sqrt(gate) (1 - s)]: the switchable loop with its switch prior.
 struct LoopResidual {
   Eigen::Vector3d measured;
@@ -304,7 +317,7 @@ void PoseGraph::attachFix(const PendingFix& fix, int a, int b, double weight_b) 
     cost = new ceres::AutoDiffCostFunction<InterpolatedFixResidual, 2, 3, 3>(
         new InterpolatedFixResidual{z, fix.whitening, weight_b});
   }
-  addFactor(FactorType::kPositionFix, a, b, cost, fix_loss_.get());
+  addFactor(FactorType::kPositionFix, a, b, cost, fix.robust ? fix_loss_.get() : nullptr);
   ++fixes_attached_;
 }
 
@@ -323,11 +336,25 @@ void PoseGraph::addOdometry(int64_t from_id, int64_t to_id, const RelativePose2d
             nullptr);
 }
 
+void PoseGraph::addRelativePosition(int64_t from_id, int64_t to_id, const Eigen::Vector2d& translation_m,
+                                    const Eigen::Matrix2d& covariance_m2) {
+  const int a = requireIndex(from_id, "addRelativePosition from"), b = requireIndex(to_id, "addRelativePosition to");
+  const std::string what = "addRelativePosition " + idText(from_id) + " -> " + idText(to_id);
+  if (!(from_id < to_id)) throw std::invalid_argument(what + ": from id not before to id");
+  if (!translation_m.allFinite()) throw std::invalid_argument(what + ": non-finite translation");
+  const Eigen::Matrix2d whitening = whiteningOf(covariance_m2, what + " covariance_m2");
+  addFactor(FactorType::kRelativePosition, a, b,
+            new ceres::AutoDiffCostFunction<RelativePositionResidual, 2, 3, 3>(
+                new RelativePositionResidual{Eigen::Vector3d(translation_m.x(), translation_m.y(), 0.0), whitening}),
+            fix_loss_.get());
+  ++relative_positions_;
+}
+
 bool PoseGraph::addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m,
-                               const Eigen::Matrix2d& covariance_m2) {
+                               const Eigen::Matrix2d& covariance_m2, bool robust) {
   if (!std::isfinite(stamp_s) || !position_en_m.allFinite())
     throw std::invalid_argument("addPositionFix: non-finite stamp or position");
-  PendingFix fix{stamp_s, position_en_m, whiteningOf(covariance_m2, "addPositionFix covariance_m2")};
+  PendingFix fix{stamp_s, position_en_m, whiteningOf(covariance_m2, "addPositionFix covariance_m2"), robust};
   if (keyframes_.empty() || stamp_s < keyframes_.front().stamp_s) return false;
   if (stamp_s > keyframes_.back().stamp_s) {
     pending_fixes_.push_back(fix);

@@ -679,6 +679,14 @@ void FusionRos::processDeadReckoning(const ros::Time& stamp, const Eigen::Vector
   enqueue(t, [this, t, base_en_m, covariance_m2, stamp]() {
     const fu::InputOutcome outcome = front_end_->addDeadReckoning(t, base_en_m, covariance_m2);
     if (outcome.camera_en_m) nav_path_.append(stamp, mapPosition(*outcome.camera_en_m));
+    if (feeder_ && outcome.rejected.empty() && outcome.camera_en_m) {
+      try {
+        feeder_->addDeadReckoning(t, *outcome.camera_en_m, covariance_m2);
+      } catch (const std::invalid_argument& e) {
+        last_problem_ = std::string("pose graph: ") + e.what();
+        ROS_WARN_THROTTLE(5.0, "fusion: pose graph: %s", e.what());
+      }
+    }
     handleOutcome("dead reckoning", outcome);
     // Without images the navigation carries the fused track: publish at its rate.
     if (outcome.update && (ros::WallTime::now() - last_motion_wall_).toSec() > 1.0) publishState(stamp);
@@ -945,7 +953,13 @@ void FusionRos::startGraph() {
   graph::BackgroundPoseGraphConfig graph_config;
   graph_config.marginals_duty_cycle = config_.graph_marginals_duty_cycle;
   graph_ = std::make_unique<graph::BackgroundPoseGraph>(graph_config);
-  feeder_ = std::make_unique<graph::KeyFrameFeeder>(graph::KeyFrameFeederConfig(), graph_.get());
+  // The dead reckoning's relative error as the filter models it.
+  graph::KeyFrameFeederConfig feeder_config;
+  const fusion::FilterConfig& filter_config = front_end_->filter().config();
+  feeder_config.dr_measurement_sigma_m = filter_config.dr_measurement_sigma_m;
+  feeder_config.dr_noise_m2_per_m = filter_config.dr_offset_noise_m2_per_m;
+  feeder_config.dr_noise_m2_per_s = filter_config.dr_offset_noise_m2_per_s;
+  feeder_ = std::make_unique<graph::KeyFrameFeeder>(feeder_config, graph_.get());
   if (config_.loop_closure) {
     graph::LoopCloserConfig loop_config;
     loop_config.image_folder = config_.loop_image_folder;
@@ -1045,9 +1059,12 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
     std::optional<int64_t> key_frame;
     if (!feeder_->started()) {
       key_frame = feeder_->start(stamp_s, state.position_en_m, *yaw_rad);
-      // What the filter knew when the graph started (the dead reckoning's or the operator's start): without it the
-      // graph's absolute position rests on its first few fixes alone.
-      feeder_->addPositionFix(stamp_s, state.position_en_m, state.position_covariance_m2);
+      // Without dead reckoning (which anchors the graph itself, KeyFrameFeeder::addDeadReckoning), what the filter
+      // knew when the graph started (the operator's start): without it the graph's absolute position rests on its
+      // first few fixes alone. Not robust: at the USBL's Cauchy scale a start that the fixes' average
+      // (0.5 m / sqrt(n)) puts a few of its sigmas away would read as an outlier and lose its hold.
+      if (dead_reckonings_ == 0)
+        feeder_->addPositionFix(stamp_s, state.position_en_m, state.position_covariance_m2, false);
     } else if (outcome.metric) {
       const double yaw_change = graph::wrapAngle(*yaw_rad - graph_last_yaw_rad_.value_or(*yaw_rad));
       key_frame = feeder_->addImageMotion(stamp_s, outcome.metric->camera_displacement_en_m,
@@ -1227,6 +1244,10 @@ void FusionRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     const std::shared_ptr<const graph::GraphSnapshot> snapshot = graph_->snapshot();
     status.add("graph key frames", feeder_ ? feeder_->keyFrames().size() : 0);
     status.add("graph key frames tied by the navigation (no image odometry)", graph_navigation_ties_);
+    if (feeder_) {
+      status.add("graph dead-reckoning ties", feeder_->deadReckoningFactors());
+      status.add("graph anchored by the dead reckoning", feeder_->deadReckoningAnchored() ? "yes" : "no");
+    }
     if (snapshot) {
       status.add("graph key frames solved", snapshot->key_frames.size());
       status.addf("graph last solve", "%.3f s CPU, %s", snapshot->report.cpu_s,

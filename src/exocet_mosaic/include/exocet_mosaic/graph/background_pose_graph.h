@@ -83,7 +83,10 @@ class BackgroundPoseGraph {
   /// As PoseGraph's, queued.
   void addKeyFrame(int64_t id, double stamp_s, const Pose2d& initial_pose);
   void addOdometry(int64_t from_id, int64_t to_id, const RelativePose2d& delta, const Eigen::Matrix3d& covariance);
-  void addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m, const Eigen::Matrix2d& covariance_m2);
+  void addRelativePosition(int64_t from_id, int64_t to_id, const Eigen::Vector2d& translation_m,
+                           const Eigen::Matrix2d& covariance_m2);
+  void addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m, const Eigen::Matrix2d& covariance_m2,
+                      bool robust = true);
   void addHeading(int64_t id, double yaw_rad, double sigma_rad);
   /// @return the loop's index, as the graph will number it
   int addLoop(int64_t from_id, int64_t to_id, const RelativePose2d& delta, const Eigen::Matrix3d& covariance);
@@ -113,10 +116,16 @@ class BackgroundPoseGraph {
     RelativePose2d delta;
     Eigen::Matrix3d covariance;
   };
+  struct RelativePositionInput {
+    int64_t from_id, to_id;
+    Eigen::Vector2d translation_m;
+    Eigen::Matrix2d covariance_m2;
+  };
   struct FixInput {
     double stamp_s;
     Eigen::Vector2d position_en_m;
     Eigen::Matrix2d covariance_m2;
+    bool robust;
   };
   struct HeadingInput {
     int64_t id;
@@ -127,7 +136,7 @@ class BackgroundPoseGraph {
     RelativePose2d delta;
     Eigen::Matrix3d covariance;
   };
-  using Input = std::variant<KeyFrameInput, OdometryInput, FixInput, HeadingInput, LoopInput>;
+  using Input = std::variant<KeyFrameInput, OdometryInput, RelativePositionInput, FixInput, HeadingInput, LoopInput>;
 
   void push(Input input);          ///< under mutex_
   bool knownId(int64_t id) const;  ///< under mutex_

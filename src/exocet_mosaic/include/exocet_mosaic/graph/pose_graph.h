@@ -9,7 +9,12 @@
  *    3x3 covariance, from the registration chain;
  *  - position fixes (USBL): (E, N) at a stamp with a 2x2 covariance; a fix stamped between two key frames constrains
  *    the linear interpolation of their positions, one after the last key frame waits for the next key frame; a
- *    Cauchy loss (PoseGraphConfig::position_fix_cauchy_scale) so that an outlier has little pull;
+ *    Cauchy loss (PoseGraphConfig::position_fix_cauchy_scale) so that an outlier has little pull, unless the fix is
+ *    added as not robust (a prior the caller trusts: the navigation's start, whose error a Cauchy loss at the USBL's
+ *    scale would read as an outlier once the fixes' average pulls a few sigmas away from it);
+ *  - relative positions (dead reckoning): the position of a key frame in the frame of an earlier one (dx, dy along the
+ *    earlier frame's axes, no yaw), 2x2 covariance, under the fixes' Cauchy loss (a reset of the vehicle's dead
+ *    reckoning is a jump the images contradict);
  *  - headings (attitude sensor): yaw of a key frame with a 1-sigma, the difference wrapped to (-pi, pi];
  *  - loop closures: the relative pose of two non-consecutive key frames, 3x3 covariance, switchable (below);
  *  - gauge: while no position fix is attached, a weak prior holds the first key frame at its initial pose, so that
@@ -180,12 +185,23 @@ class PoseGraph {
   void addOdometry(int64_t from_id, int64_t to_id, const RelativePose2d& delta, const Eigen::Matrix3d& covariance);
 
   /**
+   * @brief Adds a relative position (dead reckoning): the position of `to_id` in the frame of `from_id`
+   * (from_id < to_id), without its yaw.
+   * @param translation_m p_to - p_from along from's axes (x, y), metres
+   * @param covariance_m2 2x2 of (dx, dy), m^2
+   */
+  void addRelativePosition(int64_t from_id, int64_t to_id, const Eigen::Vector2d& translation_m,
+                           const Eigen::Matrix2d& covariance_m2);
+
+  /**
    * @brief Adds a position fix at `stamp_s`, interpolated between the two key frames around it. A fix after the
    * last key frame waits for the next one; a fix before the first key frame is dropped.
    * @param covariance_m2 2x2 of (E, N), m^2
+   * @param robust under the Cauchy loss (position_fix_cauchy_scale); false: plain least squares
    * @return false when dropped
    */
-  bool addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m, const Eigen::Matrix2d& covariance_m2);
+  bool addPositionFix(double stamp_s, const Eigen::Vector2d& position_en_m, const Eigen::Matrix2d& covariance_m2,
+                      bool robust = true);
 
   /// Adds a heading of key frame `id`: yaw (rad, ENU) with a 1-sigma `sigma_rad` > 0.
   void addHeading(int64_t id, double yaw_rad, double sigma_rad);
@@ -220,6 +236,7 @@ class PoseGraph {
   size_t numKeyFrames() const { return keyframes_.size(); }
   size_t numLoops() const { return loops_.size(); }
   size_t numPositionFixes() const { return fixes_attached_; }
+  size_t numRelativePositions() const { return relative_positions_; }
   size_t numPendingPositionFixes() const { return pending_fixes_.size(); }
   size_t numFactors() const { return factors_.size(); }
   /// Factors added since the last solve() or solveFull().
@@ -257,7 +274,7 @@ class PoseGraph {
   void setInterruptCheck(std::function<bool()> check) { interrupt_check_ = std::move(check); }
 
  private:
-  enum class FactorType { kOdometry, kPositionFix, kHeading, kLoop, kGauge };
+  enum class FactorType { kOdometry, kRelativePosition, kPositionFix, kHeading, kLoop, kGauge };
   struct KeyFrame {
     int64_t id;
     double stamp_s;
@@ -292,6 +309,7 @@ class PoseGraph {
     double stamp_s;
     Eigen::Vector2d position_en_m;
     Eigen::Matrix2d whitening;
+    bool robust;
   };
 
   int indexOf(int64_t id) const;  ///< -1 when unknown
@@ -321,6 +339,7 @@ class PoseGraph {
   std::vector<Factor> factors_;
   std::vector<PendingFix> pending_fixes_;
   size_t fixes_attached_ = 0;
+  size_t relative_positions_ = 0;
   int gauge_factor_ = -1;
   std::vector<int> dirty_;             ///< key frames touched by factors added since the last solve
   std::vector<int> dirty_loops_;       ///< loops added since the last solve
