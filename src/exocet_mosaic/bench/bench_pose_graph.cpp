@@ -76,10 +76,16 @@ struct Survey {
   static constexpr double kFixOutlierRate = 0.01;  // USBL multipath: 5 to 15 m off
   static constexpr double kLoopM = 0.05, kLoopRad = 0.5 * kDeg;
   static constexpr double kFalseLoopM = 0.02, kFalseLoopRad = 0.2 * kDeg;  // confident, and 1 m wrong
+  // Dead reckoning between consecutive key frames as the fusion models it (KeyFrameFeeder: 1 cm white noise at
+  // both ends, 1e-3 m^2 per metre), and its start, the graph's anchor.
+  static constexpr double kDeadReckoningVarianceM2 = 2 * 0.01 * 0.01 + 1e-3 * kStepM;
+  static constexpr double kDeadReckoningStartM = 0.01;
 
   std::vector<Pose2d> truth, initial;
   std::vector<double> stamps_s, headings_rad;
   std::vector<RelativePose2d> odometry;  ///< k -> k + 1
+  std::vector<Eigen::Vector2d> dead_reckoning;  ///< k -> k + 1, in k's axes
+  Eigen::Vector2d dead_reckoning_start = Eigen::Vector2d::Zero();
   Eigen::Matrix3d odometry_covariance;
   std::vector<std::pair<double, Eigen::Vector2d>> fixes;
   std::vector<LoopInput> loops;     ///< true and false, in the order a live chain finds them (by `to`)
@@ -113,6 +119,12 @@ struct Survey {
       d.yaw_rad += kOdometryYawRad * normal(rng);
       odometry.push_back(d);
     }
+    std::mt19937 dr_rng(seed + 1);  // its own stream: the other measurements as without it
+    const double dr_sigma_m = std::sqrt(kDeadReckoningVarianceM2);
+    dead_reckoning_start = truth[0].position_en_m + kDeadReckoningStartM * Eigen::Vector2d(normal(dr_rng), normal(dr_rng));
+    for (int i = 0; i + 1 < keyframes; ++i)
+      dead_reckoning.push_back(between(truth[i], truth[i + 1]).translation_m +
+                               dr_sigma_m * Eigen::Vector2d(normal(dr_rng), normal(dr_rng)));
     // The chain's estimate: odometry steps turned by the measured heading (compass-aided dead reckoning).
     initial.push_back(truth[0]);
     for (int i = 1; i < keyframes; ++i) {
@@ -175,8 +187,12 @@ struct Survey {
     for (int i = 0; i < n; ++i) {
       g->addKeyFrame(i, stamps_s[i], initial[i]);
       if (i > 0) g->addOdometry(i - 1, i, odometry[i - 1], odometry_covariance);
+      if (i > 0)
+        g->addRelativePosition(i - 1, i, dead_reckoning[i - 1], Eigen::Matrix2d::Identity() * kDeadReckoningVarianceM2);
       g->addHeading(i, headings_rad[i], kHeadingRad);
     }
+    g->addPositionFix(stamps_s[0], dead_reckoning_start,
+                      Eigen::Matrix2d::Identity() * kDeadReckoningStartM * kDeadReckoningStartM, false);
     const Eigen::Matrix2d fix_covariance = Eigen::Matrix2d::Identity() * kFixM * kFixM;
     for (const auto& [t, p] : fixes)
       if (t < stamps_s[n - 1]) g->addPositionFix(t, p, fix_covariance);
