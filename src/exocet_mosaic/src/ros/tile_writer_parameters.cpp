@@ -100,6 +100,8 @@ TileWriterNodeConfig readTileWriterNodeConfig(const ros::NodeHandle& private_nh)
   p.readDouble("exit_when_idle_s", &c.exit_when_idle_s, 0.0, 1e6,
                "flush and shut down after this many wall seconds without input, 0: never");
   p.readInt("max_failed_tiles_kept", &c.max_failed_tiles_kept, 0, 100, "closed mosaics kept for a write retry");
+  p.readInt("max_queued_tiles", &c.max_queued_tiles, 1, 100,
+            "closed mosaics waiting to be written before the composition waits for the writer");
   p.readPositiveDouble("retry_period_s", &c.retry_period_s, 3600.0, "period of write retries (s)");
   p.readPositiveDouble("resume_max_gap_s", &c.resume_max_gap_s, 1e6,
                        "an interrupted run is carried on when the first image comes at most this much after it (s)");

@@ -236,6 +236,7 @@ void TileWriterRos::checkClock(std::int64_t stamp_ns) {
     ++clock_jumps_;
     last_problem_ = "the clock jumped back (a bag played again?): the open mosaic is closed, a new one starts";
     ROS_WARN_THROTTLE(5.0, "tile writer: %s", last_problem_.c_str());
+    waitForWriteRoom();  // before compose_mutex_, which the writer takes to save its progress
     std::lock_guard<std::mutex> lock(compose_mutex_);
     if (auto closed = composer_.flush("clock_jump")) enqueue(std::move(*closed));
     assembler_.reset();
@@ -529,6 +530,7 @@ void TileWriterRos::compose(const AssembledFrame& frame) {
       closed->anchor_sigma_m = std::max(closed->anchor_sigma_m, tile_fused_sigmas_m_[tile_fused_sigmas_m_.size() / 2]);
     }
     tile_fused_sigmas_m_.clear();
+    waitForWriteRoom();
     enqueue(std::move(*closed));
   }
   if (input.pose) {
@@ -544,6 +546,7 @@ void TileWriterRos::flushAll(const std::string& reason) {
     rest = assembler_.popAll();
   }
   processReady(std::move(rest));
+  waitForWriteRoom();  // before compose_mutex_, which the writer takes to save its progress
   std::lock_guard<std::mutex> lock(compose_mutex_);
   if (auto closed = composer_.flush(reason)) {
     if (!tile_fused_sigmas_m_.empty()) {
@@ -638,8 +641,41 @@ void TileWriterRos::enqueue(compose::ClosedMosaic mosaic) {
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     write_queue_.push_back(std::move(pending));
+    tiles_queued_max_ = std::max(tiles_queued_max_, tilesQueuedLocked());
   }
   write_cv_.notify_all();
+}
+
+int TileWriterRos::tilesQueuedLocked() const {
+  return static_cast<int>(std::count_if(write_queue_.begin(), write_queue_.end(),
+                                        [](const PendingTile& p) { return !p.revision; }));
+}
+
+void TileWriterRos::waitForWriteRoom() {
+  // A closed mosaic holds its raster and its kept images (tens of MB). When the input comes faster than this machine
+  // writes tiles (a fast replay, a slow disk), the composition waits here, one tile at a time: the backlog is then
+  // the subscriber's queue of compressed images, bounded by ~queue_size, and not this node's memory. A writer stuck
+  // longer than kMaxWriteWaitS (a hung disk) is not waited for: the chain goes on and the wait is reported.
+  constexpr double kMaxWriteWaitS = 60.0;
+  std::unique_lock<std::mutex> lock(write_mutex_);
+  if (tilesQueuedLocked() < config_.max_queued_tiles) return;
+  ++composition_waits_;
+  ROS_WARN_THROTTLE(10.0,
+                    "tile writer: %d tiles wait to be written (~max_queued_tiles %d): the composition waits for the "
+                    "writer (the images come faster than this machine writes tiles; the subscriber's queue holds them "
+                    "meanwhile)",
+                    tilesQueuedLocked(), config_.max_queued_tiles);
+  const auto start = std::chrono::steady_clock::now();
+  const auto deadline = start + std::chrono::duration<double>(kMaxWriteWaitS);
+  while (!stop_writer_ && tilesQueuedLocked() >= config_.max_queued_tiles &&
+         std::chrono::steady_clock::now() < deadline)
+    write_cv_.wait_for(lock, std::chrono::milliseconds(200));
+  composition_wait_s_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (tilesQueuedLocked() >= config_.max_queued_tiles && !stop_writer_) {
+    last_write_error_ = "the writer wrote no tile for " + std::to_string(static_cast<int>(kMaxWriteWaitS)) +
+                        " s: a closed mosaic is queued beyond ~max_queued_tiles";
+    ROS_ERROR_THROTTLE(30.0, "tile writer: %s", last_write_error_.c_str());
+  }
 }
 
 void TileWriterRos::writerLoop() {
@@ -1449,8 +1485,10 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   std::size_t queued = 0, failed = 0;
   std::int64_t written = 0, write_failures = 0, dropped = 0;
   std::string write_error;
+  bool writer_behind = false;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
+    writer_behind = tilesQueuedLocked() >= config_.max_queued_tiles;
     queued = write_queue_.size();
     failed = failed_tiles_.size();
     written = tiles_written_;
@@ -1466,6 +1504,9 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(DiagnosticStatus::WARN, "no UTM zone yet (/mosaic/datum or ~utm_zone)");
   else if (images_.load() > 0 && stats.frames_composed == 0)
     status.summary(DiagnosticStatus::WARN, "images arrive but none is composed: " + stats.last_problem);
+  else if (writer_behind)
+    status.summary(DiagnosticStatus::WARN,
+                   "the writer falls behind the images: the composition waits for it (~max_queued_tiles)");
   else
     status.summary(DiagnosticStatus::OK, "composing");
   {
@@ -1502,6 +1543,12 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     }
   }
   status.add("tiles queued", queued);
+  {
+    std::lock_guard<std::mutex> lock(write_mutex_);
+    status.add("tiles queued (most at once)", tiles_queued_max_);
+    status.add("composition waits for the writer", composition_waits_);
+    status.addf("composition wait for the writer (s)", "%.1f", composition_wait_s_);
+  }
   status.add("tiles waiting for a retry", failed);
   status.add("write failures", write_failures);
   status.add("tiles lost", dropped);

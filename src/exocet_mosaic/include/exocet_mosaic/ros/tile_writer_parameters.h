@@ -54,6 +54,9 @@ struct TileWriterNodeConfig {
   double clock_jump_s = 1.0;      ///< an image older than the newest by this much restarts the mosaic (bag loop)
   double exit_when_idle_s = 0;    ///< > 0: flush and shut down after this many wall seconds without input (replays)
   int max_failed_tiles_kept = 2;  ///< closed mosaics kept in memory for a retry after a write failure
+  /// Closed mosaics waiting for the writer. Beyond, the composition waits for it: the images wait in the subscriber's
+  /// queue as compressed messages (or are dropped there) instead of the node's memory growing with the backlog.
+  int max_queued_tiles = 4;
   double retry_period_s = 10.0;
   /// An interrupted run left in the output folder is carried on when the first image comes at most this much after its
   /// newest image (s, (0, 1e6]); see tiles::continuationRefusal.

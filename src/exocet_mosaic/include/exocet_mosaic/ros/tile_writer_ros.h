@@ -105,6 +105,10 @@ class TileWriterRos {
   void processReady(std::vector<AssembledFrame> frames);
   void compose(const AssembledFrame& frame);
   void enqueue(compose::ClosedMosaic mosaic);
+  /// Waits (at most kMaxWriteWaitS) until fewer than ~max_queued_tiles closed mosaics wait for the writer. Called by
+  /// the composition without compose_mutex_ held (the writer takes it to save its progress).
+  void waitForWriteRoom();
+  int tilesQueuedLocked() const;  ///< closed mosaics in write_queue_, revisions left out (they have their own bound)
   /// The closed mosaic with the graph corrections its images were placed with (pruned from used_corrections_).
   PendingTile pendingTile(compose::ClosedMosaic mosaic);
   /// Writer thread, write_mutex_ not held: keeps the new tile's images and record on disk (keep_images). With image
@@ -298,6 +302,9 @@ class TileWriterRos {
   std::int64_t frames_composed_calls_ = 0, rejected_ = 0, clock_jumps_ = 0;
   std::int64_t poses_ = 0, camera_heights_ = 0;  ///< fused poses and camera heights received
   std::int64_t tiles_written_ = 0, write_failures_ = 0, tiles_dropped_ = 0, udp_failures_ = 0;
+  std::int64_t composition_waits_ = 0;  ///< times the composition waited for the writer (write_mutex_)
+  double composition_wait_s_ = 0.0;     ///< wall time it waited (write_mutex_)
+  int tiles_queued_max_ = 0;            ///< most closed mosaics that waited for the writer at once (write_mutex_)
   std::string last_problem_, last_write_error_;
   KeyedThrottle reject_log_{5.0};  ///< callback thread
 };
