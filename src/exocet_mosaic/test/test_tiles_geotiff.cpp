@@ -638,6 +638,28 @@ TEST(TilesGeoTiff, CogAndKmzOpenWithTheRightBounds) {
   EXPECT_EQ(kmz_alpha.at<uchar>(kmz_alpha.rows / 4, kmz_alpha.cols / 4), 255);
 }
 
+TEST(TilesGeoTiff, AGreyTileHasItsKmzInGreyRgba) {
+  // A monochrome camera's tile: grey and alpha, two bands, which GDAL's KML super-overlay driver refuses silently.
+  TempDir dir;
+  TileWriterConfig config = configFor(dir.path());
+  config.write_kmz = true;
+  GeoTiffTileWriter writer(config);
+  TileRaster raster = makeRaster(400, 300, 31, true, 500000.0, 4800000.0, 0.05);
+  cv::cvtColor(raster.image, raster.image, cv::COLOR_BGR2GRAY);
+  const WrittenTile tile = writer.write(raster, makeMetadata());
+  ASSERT_TRUE(tile.ok) << tile.error;
+  DatasetPtr kmz = openDataset(tile.kmz_path);
+  ASSERT_TRUE(kmz) << "GDAL cannot open the KMZ";
+  ASSERT_EQ(kmz->GetRasterCount(), 4);
+  const cv::Mat red = readBand(kmz.get(), 1), green = readBand(kmz.get(), 2), blue = readBand(kmz.get(), 3);
+  EXPECT_EQ(cv::norm(red, green, cv::NORM_INF), 0.0);  // grey: the three colour bands are the same
+  EXPECT_EQ(cv::norm(red, blue, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(red, cv::NORM_INF), 0.0);
+  const cv::Mat alpha = readBand(kmz.get(), 4);
+  EXPECT_EQ(alpha.at<uchar>(alpha.rows / 4, 0), 0);  // the no-data strip stays transparent
+  EXPECT_EQ(alpha.at<uchar>(alpha.rows / 4, alpha.cols / 4), 255);
+}
+
 TEST(TilesGeoTiff, LocalFrameTileHasAnEngineeringCrsInMetresAndNoWgs84Box) {
   TempDir dir;
   TileWriterConfig config = configFor(dir.path());

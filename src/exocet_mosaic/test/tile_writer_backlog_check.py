@@ -68,6 +68,8 @@ class TileWriterBacklogTest(unittest.TestCase):
         self.assertGreaterEqual(written, 4, 'frames 4 per mosaic, about half of them composed')
         tiles = sorted(glob.glob(os.path.join(OUTPUT_DIR, 'tile_[0-9][0-9][0-9][0-9].tif')))
         self.assertEqual(len(tiles), written, tiles)
+        self.assertEqual(len(glob.glob(os.path.join(OUTPUT_DIR, 'tile_[0-9][0-9][0-9][0-9].kmz'))), written,
+                         'a KMZ beside each tile (grey images: the KMZ is made RGBA)')
         for path in tiles:
             dataset = gdal.Open(path)
             self.assertIsNotNone(dataset, path)

@@ -639,6 +639,23 @@ void writeKmz(const TileWriterConfig& config, GDALDataset* source, const std::st
   DatasetPtr warped(GDALDataset::FromHandle(GDALWarp("", nullptr, 1, &source_handle, warp_options, &usage_error)));
   GDALWarpAppOptionsFree(warp_options);
   if (!warped) throw TileWriteError("cannot warp the tile to WGS 84 for the KMZ: " + errors->take());
+  if (warped->GetRasterCount() == 2) {
+    // A grey tile (grey and alpha): the super-overlay driver takes 1, 3 or 4 bands and refuses 2 without a word.
+    StringList rgba_arguments;
+    for (const char* argument : {"-of", "MEM", "-b", "1", "-b", "1", "-b", "1", "-b", "2", "-colorinterp",
+                                 "red,green,blue,alpha"})
+      rgba_arguments.add(argument);
+    GDALTranslateOptions* rgba_options = GDALTranslateOptionsNew(rgba_arguments.get(), nullptr);
+    if (!rgba_options) throw TileWriteError("bad options for the KMZ's RGBA raster: " + errors->take());
+    DatasetPtr rgba(
+        GDALDataset::FromHandle(GDALTranslate("", GDALDataset::ToHandle(warped.get()), rgba_options, &usage_error)));
+    GDALTranslateOptionsFree(rgba_options);
+    if (!rgba) throw TileWriteError("cannot make the KMZ's RGBA raster from a grey tile: " + errors->take());
+    warped = std::move(rgba);
+  }
+  if (warped->GetRasterCount() != 3 && warped->GetRasterCount() != 4)
+    throw TileWriteError("the KMZ's raster has " + std::to_string(warped->GetRasterCount()) +
+                         " bands; the KML super-overlay takes 3 (RGB) or 4 (RGBA)");
 
   GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("KMLSUPEROVERLAY");
   if (!driver) throw TileWriteError("GDAL has no KMLSUPEROVERLAY driver");
