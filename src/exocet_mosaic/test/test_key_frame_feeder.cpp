@@ -228,6 +228,28 @@ TEST(KeyFrameFeeder, AOneSecondGapDoesNotLetTheRestFloatOnTheFixes) {
   EXPECT_LT(worst_m, 0.06);
 }
 
+TEST(KeyFrameFeeder, KeyFramesStopWaitingForADeadReckoningThatStopped) {
+  // The dead reckoning stops after 5 s; the images go on for 10 minutes. The key frames waiting for a sample after
+  // their stamp are those of the last 10 s only, not every key frame since it stopped.
+  BackgroundPoseGraph graph(quietGraph());
+  KeyFrameFeeder feeder(KeyFrameFeederConfig(), &graph);
+  const Eigen::Vector2d velocity(0.0, 0.5);
+  feeder.addDeadReckoning(-0.1, Eigen::Vector2d::Zero(), Eigen::Matrix2d::Identity() * 1e-4);
+  feeder.start(0.0, Eigen::Vector2d::Zero(), M_PI / 2);
+  size_t most_waiting = 0;
+  for (int i = 1; i <= 6000; ++i) {
+    const double t = 0.1 * i;
+    if (t <= 5.0) feeder.addDeadReckoning(t, velocity * t, Eigen::Matrix2d::Identity() * 1e-4);
+    feeder.addImageMotion(t, velocity * 0.1, Eigen::Matrix2d::Identity() * 1e-8, 0.0, M_PI / 2, 0.01);
+    most_waiting = std::max(most_waiting, feeder.keyFramesAwaitingDeadReckoning());
+  }
+  ASSERT_GT(feeder.keyFrames().size(), 500u);
+  // 0.5 m/s, a key frame every ~0.3 m (0.6 s): about 17 in 10 s.
+  EXPECT_LE(most_waiting, 25u);
+  EXPECT_GE(most_waiting, 10u) << "the key frames of the last 10 s still wait (a late dead reckoning places them)";
+  EXPECT_TRUE(graph.waitIdle(60.0));
+}
+
 TEST(KeyFrameFeeder, TheDeadReckoningAnchorsTheGraphAndTiesItsKeyFrames) {
   // A straight track at 0.5 m/s heading north; exact image motions; USBL fixes 0.3 m east of the track all dive (the
   // average of a minute of 0.5 m fixes is off by about that much over short stretches); the dead reckoning at 5 Hz,

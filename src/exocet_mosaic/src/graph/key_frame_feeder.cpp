@@ -71,7 +71,7 @@ int64_t KeyFrameFeeder::start(double stamp_s, const Eigen::Vector2d& camera_en_m
   graph_->addKeyFrame(k.id, k.stamp_s, k.initial);
   key_frames_.push_back(k);
   last_stamp_s_ = stamp_s;
-  if (!placeByDeadReckoning(0)) awaiting_dr_.push_back(0);
+  if (!placeByDeadReckoning(0)) awaitDeadReckoning(0);
   return k.id;
 }
 
@@ -129,7 +129,7 @@ int64_t KeyFrameFeeder::makeKeyFrame(double stamp_s, const Eigen::Matrix3d& odom
   graph_->addOdometry(a.id, b.id, delta, odometry_covariance);
   if (sensor_yaw_rad && sensor_yaw_sigma_rad > 0.0) graph_->addHeading(b.id, *sensor_yaw_rad, sensor_yaw_sigma_rad);
   key_frames_.push_back(b);
-  if (!placeByDeadReckoning(key_frames_.size() - 1)) awaiting_dr_.push_back(key_frames_.size() - 1);
+  if (!placeByDeadReckoning(key_frames_.size() - 1)) awaitDeadReckoning(key_frames_.size() - 1);
   displacement_en_m_.setZero();
   covariance_m2_.setZero();
   yaw_change_rad_ = 0.0;
@@ -171,6 +171,16 @@ void KeyFrameFeeder::addDeadReckoning(double stamp_s, const Eigen::Vector2d& cam
   for (const size_t index : awaiting_dr_)
     if (!placeByDeadReckoning(index)) waiting.push_back(index);
   awaiting_dr_.swap(waiting);
+}
+
+void KeyFrameFeeder::awaitDeadReckoning(size_t index) {
+  awaiting_dr_.push_back(index);
+  // A key frame whose dead reckoning has not come kDeadReckoningHistoryS after it will not get one (the dead reckoning
+  // stopped): it is let go, so that the list does not grow for the rest of the dive.
+  const double oldest_s = key_frames_[index].stamp_s - kDeadReckoningHistoryS;
+  const auto kept = std::find_if(awaiting_dr_.begin(), awaiting_dr_.end(),
+                                 [&](size_t i) { return key_frames_[i].stamp_s >= oldest_s; });
+  awaiting_dr_.erase(awaiting_dr_.begin(), kept);
 }
 
 bool KeyFrameFeeder::placeByDeadReckoning(size_t index) {

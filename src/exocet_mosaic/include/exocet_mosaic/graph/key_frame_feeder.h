@@ -125,6 +125,8 @@ class KeyFrameFeeder {
   /// Relative-position factors given to the graph, and whether the dead reckoning anchored it.
   int64_t deadReckoningFactors() const { return dr_factors_; }
   bool deadReckoningAnchored() const { return dr_anchored_; }
+  /// Key frames waiting for a dead-reckoning sample after their stamp (those of the last kDeadReckoningHistoryS).
+  size_t keyFramesAwaitingDeadReckoning() const { return awaiting_dr_.size(); }
 
   const std::vector<FeederKeyFrame>& keyFrames() const { return key_frames_; }
   /// The chain's current camera position and yaw (the last key frame's plus the motions since).
@@ -142,6 +144,9 @@ class KeyFrameFeeder {
   /// Gives key frame `index` its dead-reckoning position when two samples around its stamp are known; true when
   /// settled (given one, or never will: the samples around it too far apart).
   bool placeByDeadReckoning(size_t index);
+  /// Puts key frame `index` on the list waiting for the dead reckoning; lets go of those older than it by more than
+  /// kDeadReckoningHistoryS.
+  void awaitDeadReckoning(size_t index);
   /// The anchor or the relative position of key frame `index`, which has just got its dead-reckoning position.
   void tieByDeadReckoning(size_t index, const Eigen::Matrix2d& covariance_m2);
 
