@@ -345,6 +345,46 @@ TEST(NavigationFilter, OutOfSequenceFixEqualsInOrderProcessing) {
   EXPECT_LT((late.current().position_en_m - ordered.current().position_en_m).norm(), 1e-9);
 }
 
+TEST(NavigationFilter, StateAtALateImagesStampIsThePosteriorThereNotTheLatest) {
+  // The images 2 s behind the navigation (a registration that lags, a stalled replay): each motion is applied behind
+  // newer dead reckoning and fixes. The state at its stamp is what a filter fed in order had there; the latest state
+  // is 2 s of travel further on (what a key frame or a fused pose must not take).
+  SyntheticDiveConfig dc;
+  dc.duration_s = 60.0;
+  dc.seed = 9;
+  dc.model = FilterConfig();
+  const SyntheticDive dive = makeSyntheticDive(dc);
+  std::vector<NavEvent> events = inStampOrder(dive.events);
+  NavigationFilter ordered(dc.model);
+  ordered.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  for (const NavEvent& e : events) feed(ordered, e);
+  for (NavEvent& e : events)
+    e.arrival_s = e.stamp_s + (e.kind == NavEvent::kImage || e.kind == NavEvent::kImageFailure ? 2.0 : 0.0);
+  std::stable_sort(events.begin(), events.end(),
+                   [](const NavEvent& a, const NavEvent& b) { return a.arrival_s < b.arrival_s; });
+  NavigationFilter late(dc.model);
+  late.initialize(dc.t0_s, dive.initial_estimate, dive.initial_covariance);
+  double worst_m = 0.0, largest_lead_m = 0.0;
+  int checked = 0;
+  for (const NavEvent& e : events) {
+    const UpdateResult r = feed(late, e);
+    if (e.kind != NavEvent::kImage || r.status != UpdateStatus::kApplied) continue;
+    const auto& steps = ordered.log().steps;
+    const auto there = std::find_if(steps.begin(), steps.end(), [&](const FilterStep& s) { return s.stamp_s == e.stamp_s; });
+    ASSERT_NE(there, steps.end());
+    const FilterState at = late.stateAt(e.stamp_s);
+    EXPECT_DOUBLE_EQ(at.stamp_s, e.stamp_s);
+    worst_m = std::max(worst_m, (at.position_en_m - FilterState::from(there->stamp_s, there->x_posterior,
+                                                                        there->P_posterior).position_en_m).norm());
+    largest_lead_m = std::max(largest_lead_m, (late.current().position_en_m - at.position_en_m).norm());
+    ++checked;
+  }
+  EXPECT_GT(checked, 200);
+  EXPECT_LT(worst_m, 1e-9);
+  // 0.4 m/s over up to 2 s: the latest state is well ahead of the image's.
+  EXPECT_GT(largest_lead_m, 0.5);
+}
+
 TEST(NavigationFilter, TooOldFixIsReported) {
   FilterConfig config;
   config.history_s = 5.0;

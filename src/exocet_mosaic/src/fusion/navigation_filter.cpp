@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <iterator>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -242,6 +243,15 @@ double NavigationFilter::latestStamp() const { return log_.steps.empty() ? 0.0 :
 FilterState NavigationFilter::current() const {
   if (!initialized_ || log_.steps.empty()) return FilterState();
   const FilterStep& s = log_.steps.back();
+  return FilterState::from(s.stamp_s, s.x_posterior, s.P_posterior);
+}
+
+FilterState NavigationFilter::stateAt(double stamp_s) const {
+  if (!initialized_ || log_.steps.empty()) return FilterState();
+  const auto after = std::upper_bound(log_.steps.begin(), log_.steps.end(), stamp_s,
+                                      [](double t, const FilterStep& s) { return t < s.stamp_s; });
+  if (after == log_.steps.begin()) return current();
+  const FilterStep& s = *std::prev(after);
   return FilterState::from(s.stamp_s, s.x_posterior, s.P_posterior);
 }
 

@@ -841,7 +841,8 @@ void FusionRos::publishState(const ros::Time& stamp) {
   // When the images stop the navigation carries the track, and its stamps can be an image's already published.
   if (!front_end_->filter().initialized() || stamp == last_published_stamp_) return;
   last_published_stamp_ = stamp;
-  const fu::FilterState s = front_end_->filter().current();
+  // At the input's stamp: a late image motion is processed after newer inputs (the filter's latest step is theirs).
+  const fu::FilterState s = front_end_->filter().stateAt(stamp.toSec());
   std::optional<Eigen::Quaterniond> attitude = front_end_->attitudeAt(stamp.toSec());
   // No attitude sensor: the operator's heading as the images carried it on, the vehicle level, as the front end
   // takes it for the motions; the camera height and the tiles' orientation need it.
@@ -1016,7 +1017,7 @@ void FusionRos::offerKeyFrame(int64_t id, double stamp_s, const std::optional<Ei
   kf.key_frame.id = id;
   kf.key_frame.stamp_s = stamp_s;
   kf.key_frame.pose = feeder_->keyFrames().back().initial;
-  kf.key_frame.position_cov_m2 = front_end_->filter().current().position_covariance_m2;
+  kf.key_frame.position_cov_m2 = front_end_->filter().stateAt(stamp_s).position_covariance_m2;
   kf.key_frame.yaw_sigma_rad = attitude ? 0.02 : 0.1;
   kf.key_frame.camera_height_m = *height_m;
   kf.key_frame.camera.fx_px = k(0, 0);
@@ -1055,7 +1056,10 @@ void FusionRos::feedGraph(double stamp_s, const fu::InputOutcome& outcome) {
   }
   if (!yaw_rad || !front_end_->filter().initialized()) return;
   try {
-    const fu::FilterState state = front_end_->filter().current();
+    // The filter at the key frame's stamp, not at its latest step: a motion that arrived late (after a burst, or
+    // after release(true) let newer navigation through) is applied behind newer inputs, and the filter's latest
+    // position would be taken for the key frame's (the graph corrections then spike by the lag times the speed).
+    const fu::FilterState state = front_end_->filter().stateAt(stamp_s);
     std::optional<int64_t> key_frame;
     if (!feeder_->started()) {
       key_frame = feeder_->start(stamp_s, state.position_en_m, *yaw_rad);

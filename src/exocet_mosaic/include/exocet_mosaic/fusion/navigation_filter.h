@@ -185,6 +185,9 @@ class NavigationFilter {
 
   /// At the latest stamp processed (default FilterState before initialisation).
   FilterState current() const;
+  /// The posterior of the last step at or before stamp_s (the state at an input's stamp even when later inputs were
+  /// processed before it, e.g. a late image motion); current() when stamp_s is before every step kept.
+  FilterState stateAt(double stamp_s) const;
   /// Extrapolated to a later stamp (no state change): with the velocity of the latest image motion when it ends
   /// within one second of the latest stamp (its covariance scaled to the time), else kept in place with the
   /// no-motion random walk. A stamp at or before the latest returns current().
