@@ -431,7 +431,8 @@ def chain_figures(run, frames, tiles_dir=None, stamps=None, fps=25.0, nodes=NODE
     fig['tile_writer_images_received'] = received
     for key in ('frames composed', 'frames skipped (no pose)', 'frames skipped (no chain, no pose)',
                 'frames released incomplete (timeout)', 'images rejected', 'registration gaps bridged by the navigation',
-                'navigation jumps', 'tiles written', 'tiles lost', 'write failures'):
+                'navigation jumps', 'tiles written', 'tiles lost', 'write failures', 'tiles queued (most at once)',
+                'composition waits for the writer', 'composition wait for the writer (s)'):
         if key in diag:
             fig['tile_writer_' + re.sub(r'[^a-z0-9]+', '_', key).strip('_')] = diag[key]
     dropped_registration = max(0, frames - 1 - len(motions))
