@@ -660,6 +660,35 @@ TEST(TilesGeoTiff, AGreyTileHasItsKmzInGreyRgba) {
   EXPECT_EQ(alpha.at<uchar>(alpha.rows / 4, alpha.cols / 4), 255);
 }
 
+TEST(TilesGeoTiff, ACompanionThatCannotBeWrittenIsLeftOutAndTheTileIsStillWritten) {
+  // A directory in the way of the KMZ's temporary: GDAL cannot create the KMZ. The GeoTIFF (the product) and the
+  // COG are still written and committed; the KMZ is reported and leaves no partial file.
+  TempDir dir;
+  TileWriterConfig config = configFor(dir.path());
+  config.write_cog = true;
+  config.write_kmz = true;
+  GeoTiffTileWriter writer(config);
+  const std::string blocker = dir.path() + "/.tile_0000.partial.kmz";
+  ASSERT_EQ(::mkdir(blocker.c_str(), 0755), 0);
+  const WrittenTile tile = writer.write(makeRaster(400, 300, 31, true, 500000.0, 4800000.0, 0.05), makeMetadata());
+  ASSERT_TRUE(tile.ok) << tile.error;
+  ASSERT_EQ(tile.companion_errors.size(), 1u);
+  EXPECT_EQ(tile.companion_errors[0].rfind("KMZ: ", 0), 0u) << tile.companion_errors[0];
+  EXPECT_NE(tile.companion_errors[0].find(".tile_0000.partial.kmz"), std::string::npos) << tile.companion_errors[0];
+  EXPECT_TRUE(tile.kmz_path.empty());
+  EXPECT_EQ(tile.cog_path, dir.path() + "/tile_0000.cog.tif");
+  EXPECT_TRUE(openDataset(tile.geotiff_path)) << "GDAL cannot open the GeoTIFF";
+  EXPECT_TRUE(openDataset(tile.cog_path)) << "GDAL cannot open the COG";
+  ::rmdir(blocker.c_str());
+  EXPECT_EQ(filesIn(dir.path()), (std::vector<std::string>{"tile_0000.cog.tif", "tile_0000.tfw", "tile_0000.tif"}));
+
+  // The next tile, with nothing in the way, has all its files again.
+  const WrittenTile next = writer.write(makeRaster(400, 300, 31, true, 500020.0, 4800000.0, 0.05), makeMetadata());
+  ASSERT_TRUE(next.ok) << next.error;
+  EXPECT_TRUE(next.companion_errors.empty());
+  EXPECT_FALSE(next.kmz_path.empty());
+}
+
 TEST(TilesGeoTiff, LocalFrameTileHasAnEngineeringCrsInMetresAndNoWgs84Box) {
   TempDir dir;
   TileWriterConfig config = configFor(dir.path());

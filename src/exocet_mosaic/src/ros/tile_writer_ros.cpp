@@ -766,6 +766,7 @@ void TileWriterRos::writerLoop() {
       continue;
     }
     ++tiles_written_;
+    noteCompanionErrorsLocked(tile);
     newest_frame_on_disk_ = std::max(newest_frame_on_disk_, pending.mosaic.last_frame);
     if (record) {
       tiles_changed_since_adjustment_ = true;
@@ -976,6 +977,7 @@ void TileWriterRos::writeRevision(PendingTile& pending, tiles::GeoTiffTileWriter
     write_cv_.notify_all();
     return;
   }
+  noteCompanionErrorsLocked(tile);
   // Keep an adjustment made while this version was drawn (applied to the record since): it is the newer.
   const auto current = records_.find(record.index);
   tiles::TileRecord committed = record;
@@ -1378,6 +1380,15 @@ void TileWriterRos::saveCorrections() {
   }
 }
 
+void TileWriterRos::noteCompanionErrorsLocked(const tiles::WrittenTile& tile) {
+  last_tile_lacks_companion_ = !tile.companion_errors.empty();
+  for (const std::string& error : tile.companion_errors) {
+    ++companion_failures_;
+    last_companion_error_ = "tile " + std::to_string(tile.index) + " " + error;
+    ROS_WARN_THROTTLE(5.0, "tile writer: %s written without its %s", tile.geotiff_path.c_str(), error.c_str());
+  }
+}
+
 void TileWriterRos::publishTile(const tiles::WrittenTile& tile, const compose::ClosedMosaic& mosaic) {
   exocet_msgs::Tile msg;
   msg.header.stamp.fromSec(std::max(0.0, mosaic.end_time_s));
@@ -1484,8 +1495,9 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   }
   std::size_t queued = 0, failed = 0;
   std::int64_t written = 0, write_failures = 0, dropped = 0;
-  std::string write_error;
-  bool writer_behind = false;
+  std::string write_error, companion_error;
+  bool writer_behind = false, lacks_companion = false;
+  std::int64_t companion_failures = 0;
   {
     std::lock_guard<std::mutex> lock(write_mutex_);
     writer_behind = tilesQueuedLocked() >= config_.max_queued_tiles;
@@ -1495,6 +1507,9 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     write_failures = write_failures_;
     dropped = tiles_dropped_;
     write_error = last_write_error_;
+    lacks_companion = last_tile_lacks_companion_;
+    companion_error = last_companion_error_;
+    companion_failures = companion_failures_;
   }
   if (dropped > 0)
     status.summary(DiagnosticStatus::ERROR, "tiles lost: the output folder kept failing (" + write_error + ")");
@@ -1504,6 +1519,8 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(DiagnosticStatus::WARN, "no UTM zone yet (/mosaic/datum or ~utm_zone)");
   else if (images_.load() > 0 && stats.frames_composed == 0)
     status.summary(DiagnosticStatus::WARN, "images arrive but none is composed: " + stats.last_problem);
+  else if (lacks_companion)
+    status.summary(DiagnosticStatus::WARN, "tiles written without a companion file: " + companion_error);
   else if (writer_behind)
     status.summary(DiagnosticStatus::WARN,
                    "the writer falls behind the images: the composition waits for it (~max_queued_tiles)");
@@ -1552,6 +1569,8 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("tiles waiting for a retry", failed);
   status.add("write failures", write_failures);
   status.add("tiles lost", dropped);
+  status.add("companion files not written (COG, KMZ)", companion_failures);
+  if (!companion_error.empty()) status.add("last companion file not written", companion_error);
   status.add("UDP failures", udp_failures_);
   if (config_.gain_compensation) {
     std::lock_guard<std::mutex> lock(write_mutex_);

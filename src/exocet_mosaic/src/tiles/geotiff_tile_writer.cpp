@@ -366,13 +366,18 @@ class TileFiles {
   }
 
   void abort() {
-    for (const auto& entry : entries_) {
-      // GDAL side-cars are disabled (PAM off, internal mask), but a driver may still leave one.
-      for (const char* sidecar : {"", ".aux.xml", ".msk", ".ovr", ".ovr.tmp", ".msk.ovr.tmp"}) {
-        ::unlink((entry.temporary + sidecar).c_str());
-      }
-    }
+    for (const auto& entry : entries_) removeTemporary(entry.temporary);
     entries_.clear();
+  }
+
+  /// Gives up one file (its temporary and side-cars removed): the others are committed without it.
+  void drop(const std::string& temporary) {
+    for (auto it = entries_.begin(); it != entries_.end(); ++it) {
+      if (it->temporary != temporary) continue;
+      removeTemporary(it->temporary);
+      entries_.erase(it);
+      return;
+    }
   }
 
  private:
@@ -380,6 +385,13 @@ class TileFiles {
     std::string final_path;
     std::string temporary;
   };
+  static void removeTemporary(const std::string& temporary) {
+    // GDAL side-cars are disabled (PAM off, internal mask), but a driver may still leave one. A directory in the
+    // way of a temporary (rmdir) is not this writer's to remove: unlink fails on it and it stays.
+    for (const char* sidecar : {"", ".aux.xml", ".msk", ".ovr", ".ovr.tmp", ".msk.ovr.tmp"}) {
+      ::unlink((temporary + sidecar).c_str());
+    }
+  }
   std::string folder_;
   std::vector<Entry> entries_;
 };
@@ -884,8 +896,18 @@ WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMe
     if (config_.write_world_file) writeTextFile(world_tmp, worldFileText(raster), "world file");
     if (config_.write_cog || write_kmz) {
       DatasetPtr written = openWritten(tif_tmp, &errors);
-      if (config_.write_cog) writeCog(config_, written.get(), cog_tmp, &errors);
-      if (write_kmz) writeKmz(config_, written.get(), base, kmz_tmp, &errors);
+      // A companion that fails is left out and reported; the GeoTIFF and the other companions are still written.
+      const auto companion = [&](const char* what, const std::string& temporary, const auto& write) {
+        try {
+          write();
+        } catch (const TileWriteError& e) {
+          errors.take();
+          tile.companion_errors.push_back(std::string(what) + ": " + e.what());
+          files.drop(temporary);
+        }
+      };
+      if (config_.write_cog) companion("COG", cog_tmp, [&] { writeCog(config_, written.get(), cog_tmp, &errors); });
+      if (write_kmz) companion("KMZ", kmz_tmp, [&] { writeKmz(config_, written.get(), base, kmz_tmp, &errors); });
     }
     files.commit();
   } catch (const TileWriteError& e) {
@@ -899,8 +921,13 @@ WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMe
   const std::string folder_base = config_.output_dir + "/" + base;
   tile.geotiff_path = folder_base + ".tif";
   if (config_.write_world_file) tile.world_file_path = folder_base + ".tfw";
-  if (config_.write_cog) tile.cog_path = folder_base + ".cog.tif";
-  if (write_kmz) tile.kmz_path = folder_base + ".kmz";
+  const auto failed = [&](const char* what) {
+    for (const auto& error : tile.companion_errors)
+      if (error.rfind(what, 0) == 0) return true;
+    return false;
+  };
+  if (config_.write_cog && !failed("COG")) tile.cog_path = folder_base + ".cog.tif";
+  if (write_kmz && !failed("KMZ")) tile.kmz_path = folder_base + ".kmz";
   return finish("");
 }
 

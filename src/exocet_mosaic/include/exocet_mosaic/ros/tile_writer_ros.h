@@ -108,6 +108,8 @@ class TileWriterRos {
   /// Waits (at most kMaxWriteWaitS) until fewer than ~max_queued_tiles closed mosaics wait for the writer. Called by
   /// the composition without compose_mutex_ held (the writer takes it to save its progress).
   void waitForWriteRoom();
+  /// Counts and logs the companions (COG, KMZ) a written tile lacks; write_mutex_ held.
+  void noteCompanionErrorsLocked(const tiles::WrittenTile& tile);
   int tilesQueuedLocked() const;  ///< closed mosaics in write_queue_, revisions left out (they have their own bound)
   /// The closed mosaic with the graph corrections its images were placed with (pruned from used_corrections_).
   PendingTile pendingTile(compose::ClosedMosaic mosaic);
@@ -306,6 +308,9 @@ class TileWriterRos {
   double composition_wait_s_ = 0.0;     ///< wall time it waited (write_mutex_)
   int tiles_queued_max_ = 0;            ///< most closed mosaics that waited for the writer at once (write_mutex_)
   std::string last_problem_, last_write_error_;
+  std::int64_t companion_failures_ = 0;  ///< COG / KMZ files left out of a written tile (write_mutex_)
+  bool last_tile_lacks_companion_ = false;  ///< the newest tile written lacks one (write_mutex_)
+  std::string last_companion_error_;        ///< (write_mutex_)
   KeyedThrottle reject_log_{5.0};  ///< callback thread
 };
 

@@ -8,6 +8,7 @@
 #include <limits>
 #include <map>
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -57,6 +58,9 @@ struct WrittenTile {
   std::string world_file_path;  ///< <output_dir>/<prefix>_<NNNN>.tfw, empty when not written
   std::string cog_path;         ///< <output_dir>/<prefix>_<NNNN>.cog.tif, empty when not written
   std::string kmz_path;         ///< <output_dir>/<prefix>_<NNNN>.kmz, empty when not written
+  /// Companions (COG, KMZ) that could not be written, each with its error. The tile is still written (ok): the
+  /// GeoTIFF is the product, a companion is a convenience, and a tile must not be lost for one.
+  std::vector<std::string> companion_errors;
   int epsg = 0;             ///< EPSG code of the GeoTIFF's SRS (326zz / 327zz, UPS 32661 / 32761); 0 in a local frame
   std::string local_frame;  ///< the raster's local frame, empty for UTM (TileRaster::local_frame)
   double min_easting_m = 0.0, min_northing_m = 0.0;  ///< outer corners of the raster in its UTM zone or local frame
