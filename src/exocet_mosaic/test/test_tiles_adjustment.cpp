@@ -189,3 +189,55 @@ TEST(TilesAdjustment, BadInputIsNamed) {
   EXPECT_NE(invalid.error.find("patch_px must be a power of two in [32, 1024], got 100"), std::string::npos)
       << invalid.error;
 }
+
+TEST(TilesAdjustment, ACacheMeasuresOnlyThePairsOfANewFileAndSolvesTheSame) {
+  const compose_test::TruthOrtho truth =
+      compose_test::TruthOrtho::make(1150 * kGsd, 750 * kGsd, kGsd, 500000.0, 4800000.0);
+  TempDir live;
+  const std::vector<std::string> paths = writeTiles(truth, fourTilesTwoLines(), live.path());
+  ASSERT_EQ(paths.size(), 4u);
+  const et::TileAdjustmentResult plain = et::measureAndSolve(paths, et::TileAdjustmentConfig());
+  ASSERT_TRUE(plain.ok) << plain.error;
+
+  et::TilePairCache cache;
+  const et::TileAdjustmentResult first = et::measureAndSolve(paths, et::TileAdjustmentConfig(), &cache);
+  ASSERT_TRUE(first.ok) << first.error;
+  EXPECT_EQ(cache.measured(), 6);  // every pair of the same EPSG and GSD, overlapping or not
+  EXPECT_EQ(cache.reused(), 0);
+  const et::TileAdjustmentResult second = et::measureAndSolve(paths, et::TileAdjustmentConfig(), &cache);
+  ASSERT_TRUE(second.ok) << second.error;
+  EXPECT_EQ(cache.measured(), 6);  // nothing read again
+  EXPECT_EQ(cache.reused(), 6);
+  for (const et::TileAdjustmentResult* r : {&first, &second}) {
+    ASSERT_EQ(r->pairs.size(), plain.pairs.size());
+    for (std::size_t i = 0; i < plain.pairs.size(); ++i) {
+      EXPECT_EQ(r->pairs[i].a, plain.pairs[i].a);
+      EXPECT_EQ(r->pairs[i].b, plain.pairs[i].b);
+      EXPECT_NEAR((r->pairs[i].offset_en_m - plain.pairs[i].offset_en_m).norm(), 0.0, 1e-12);
+    }
+    for (std::size_t i = 0; i < plain.tiles.size(); ++i)
+      EXPECT_NEAR((r->tiles[i].shift_en_m - plain.tiles[i].shift_en_m).norm(), 0.0, 1e-12);
+  }
+
+  // Tile 3 drawn again (a new version, a new name) with its error removed: only its three pairs are measured, and
+  // the solution is that of a full measurement.
+  std::vector<PlantedTile> redrawn = fourTilesTwoLines();
+  redrawn[3].error_m = Eigen::Vector2d(0.0, 0.0);
+  TempDir other;
+  const std::vector<std::string> again = writeTiles(truth, redrawn, other.path());
+  std::vector<std::string> now = paths;
+  now[3] = live.path() + "/tile_0003_v2.tif";
+  ASSERT_EQ(std::rename(again[3].c_str(), now[3].c_str()), 0);
+  const et::TileAdjustmentResult third = et::measureAndSolve(now, et::TileAdjustmentConfig(), &cache);
+  ASSERT_TRUE(third.ok) << third.error;
+  EXPECT_EQ(cache.measured(), 9);
+  EXPECT_EQ(cache.reused(), 9);
+  EXPECT_EQ(cache.size(), 6u);  // the pairs of the old version are let go
+  const et::TileAdjustmentResult full = et::measureAndSolve(now, et::TileAdjustmentConfig());
+  ASSERT_TRUE(full.ok) << full.error;
+  ASSERT_EQ(third.pairs.size(), full.pairs.size());
+  for (std::size_t i = 0; i < full.tiles.size(); ++i)
+    EXPECT_NEAR((third.tiles[i].shift_en_m - full.tiles[i].shift_en_m).norm(), 0.0, 1e-12);
+  // And the new version did change what tile 3 needs: its shift differs from the first solution's.
+  EXPECT_GT((third.tiles[3].shift_en_m - first.tiles[3].shift_en_m).norm(), 0.005);
+}

@@ -1320,8 +1320,11 @@ int TileWriterRos::adjustWrittenTiles() {
     }
   }
   if (paths.size() < 2) return 0;
-  const tiles::TileAdjustmentResult network = tiles::measureAndSolve(paths, tiles::TileAdjustmentConfig());
+  const tiles::TileAdjustmentResult network =
+      tiles::measureAndSolve(paths, tiles::TileAdjustmentConfig(), &tile_pairs_);
   std::lock_guard<std::mutex> lock(write_mutex_);
+  tile_pairs_measured_ = tile_pairs_.measured();
+  tile_pairs_reused_ = tile_pairs_.reused();
   if (!network.ok) {
     last_rerender_problem_ = "tiles not registered with each other: " + network.error;
     ROS_WARN_THROTTLE(30.0, "tile writer: %s", last_rerender_problem_.c_str());
@@ -1606,6 +1609,8 @@ void TileWriterRos::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
       status.addf("largest move of a written tile's images (m)", "%.4f", max_tile_move_m_);
       status.addf("last drawing of a tile again (ms)", "%.0f", last_rerender_ms_);
       status.add("registrations of the tiles with each other", tile_adjustments_);
+      status.add("tile pairs measured / reused by them",
+                 std::to_string(tile_pairs_measured_) + " / " + std::to_string(tile_pairs_reused_));
       status.addf("largest offset between overlapping tiles at the last registration (px)", "%.2f",
                   last_adjustment_pair_max_px_);
       if (!last_rerender_problem_.empty()) status.add("last problem drawing a tile again", last_rerender_problem_);

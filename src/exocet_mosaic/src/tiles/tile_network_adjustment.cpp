@@ -98,9 +98,11 @@ bool readWindow(const AdjustedTile& tile, const cv::Rect& window, cv::Mat* grey,
   return true;
 }
 
-/// The offset of b's content from a's in their overlap (b minus a), or false when it cannot be measured.
+/// The offset of b's content from a's in their overlap (b minus a), or false when it cannot be measured (*read_failed
+/// set when a file could not be read, which the next attempt may).
 bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustmentConfig& config,
-                 TilePairOffset* pair) {
+                 TilePairOffset* pair, bool* read_failed) {
+  *read_failed = false;
   const double g = a.gsd_m;
   const double e0 = std::max(a.origin_easting_m, b.origin_easting_m);
   const double e1 = std::min(a.origin_easting_m + a.width_px * g, b.origin_easting_m + b.width_px * g);
@@ -120,7 +122,10 @@ bool measurePair(const AdjustedTile& a, const AdjustedTile& b, const TileAdjustm
       (window_b & cv::Rect(0, 0, b.width_px, b.height_px)) != window_b)
     return false;
   cv::Mat grey_a, alpha_a, grey_b, alpha_b;
-  if (!readWindow(a, window_a, &grey_a, &alpha_a) || !readWindow(b, window_b, &grey_b, &alpha_b)) return false;
+  if (!readWindow(a, window_a, &grey_a, &alpha_a) || !readWindow(b, window_b, &grey_b, &alpha_b)) {
+    *read_failed = true;
+    return false;
+  }
 
   // Band-passed: the lamp's shading differs between passes, the seabed's texture does not.
   for (cv::Mat* grey : {&grey_a, &grey_b}) {
@@ -350,7 +355,8 @@ std::vector<std::string> listTiles(const std::string& folder, std::string* error
   return paths;
 }
 
-TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config) {
+TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config,
+                                     TilePairCache* cache) {
   TileAdjustmentResult result;
   const std::string invalid = config.validate();
   if (!invalid.empty()) {
@@ -367,16 +373,32 @@ TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, cons
     result.tiles.push_back(tile);
   }
   const int n = static_cast<int>(result.tiles.size());
+  decltype(TilePairCache::pairs_) kept;  // this call's pairs: what the cache holds next
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
       const AdjustedTile &a = result.tiles[i], &b = result.tiles[j];
       if (a.epsg != b.epsg || std::abs(a.gsd_m - b.gsd_m) > 1e-9 * a.gsd_m) continue;
-      TilePairOffset pair;
-      pair.a = i;
-      pair.b = j;
-      if (measurePair(a, b, config, &pair)) result.pairs.push_back(pair);
+      const std::pair<std::string, std::string> key(a.path, b.path);
+      std::optional<TilePairOffset> measured;
+      const auto known = cache ? cache->pairs_.find(key) : decltype(kept)::iterator();
+      if (cache && known != cache->pairs_.end()) {
+        measured = known->second;
+        ++cache->reused_;
+      } else {
+        TilePairOffset pair;
+        bool read_failed = false;
+        if (measurePair(a, b, config, &pair, &read_failed)) measured = pair;
+        if (cache) ++cache->measured_;
+        if (read_failed) continue;  // not kept: measured again next time
+      }
+      if (cache) kept.emplace(key, measured);
+      if (!measured) continue;
+      measured->a = i;
+      measured->b = j;
+      result.pairs.push_back(*measured);
     }
   }
+  if (cache) cache->pairs_.swap(kept);
   // Least squares over the 4 unknowns of each tile (shift E, N, scale, rotation): every patch's offset, after the
   // adjustment, is zero (weighed by the patch's area: a phase correlation's variance falls with it); the shifts within
   // the navigation's 1-sigma; rotation and scale within rotation_scale_sigma.

@@ -63,6 +63,7 @@
 #include "exocet_mosaic/ros/tile_writer_parameters.h"
 #include "exocet_mosaic/tiles/geotiff_tile_writer.h"
 #include "exocet_mosaic/tiles/image_gain_window.h"
+#include "exocet_mosaic/tiles/tile_network_adjustment.h"
 #include "exocet_mosaic/tiles/tile_notifier.h"
 #include "exocet_mosaic/tiles/tile_revisions.h"
 #include "exocet_mosaic/tiles/tile_writer_resume.h"
@@ -265,6 +266,10 @@ class TileWriterRos {
   bool vrt_stale_ = false;                       ///< writer thread
   ros::WallTime last_vrt_wall_;
   std::int64_t tile_adjustments_ = 0;
+  /// The tile pairs measured by the registrations of the tiles with each other: each registers only the pairs with a
+  /// tile drawn since (rerender thread; the destructor's after it stops).
+  tiles::TilePairCache tile_pairs_;
+  std::int64_t tile_pairs_measured_ = 0, tile_pairs_reused_ = 0;  ///< (write_mutex_)
   double last_adjustment_pair_max_px_ = 0;
   bool redraws_ = false;  ///< the rerender thread runs (graph corrections, or image gains)
   // Gains of the kept images.

@@ -13,7 +13,11 @@
  */
 #pragma once
 
+#include <cstdint>
+#include <map>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -94,11 +98,33 @@ struct TileAdjustmentResult {
 std::vector<std::string> listTiles(const std::string& folder, std::string* error = nullptr);
 
 /**
+ * @brief The pairs an earlier measureAndSolve measured, by the paths of their two files, so that the next one reads
+ * and measures only the pairs with a new file. Exact for the tile writer's folders: a tile drawn again is written
+ * under a new name (its version is in it), and a file is never rewritten under its name. Holds the pairs of the last
+ * call's tiles only. For one TileAdjustmentConfig. Not thread-safe.
+ */
+class TilePairCache {
+ public:
+  std::size_t size() const { return pairs_.size(); }
+  std::int64_t measured() const { return measured_; }  ///< pairs measured (or found not measurable) over the calls
+  std::int64_t reused() const { return reused_; }      ///< pairs taken from the cache over the calls
+
+ private:
+  friend TileAdjustmentResult measureAndSolve(const std::vector<std::string>&, const TileAdjustmentConfig&,
+                                              TilePairCache*);
+  /// (path a, path b) -> the pair (indices a, b unset), or nullopt when the two do not give a measurement.
+  std::map<std::pair<std::string, std::string>, std::optional<TilePairOffset>> pairs_;
+  std::int64_t measured_ = 0, reused_ = 0;
+};
+
+/**
  * @brief Reads the tiles (GeoTIFFs written by GeoTiffTileWriter: colour or grey bands and an alpha band), measures
  * every overlapping pair of the same EPSG and GSD, and solves one similarity per tile.
  * @param paths  the live GeoTIFFs
+ * @param cache  if given, the pairs of files it measured before are taken from it, and it keeps this call's pairs
  */
-TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config);
+TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, const TileAdjustmentConfig& config,
+                                     TilePairCache* cache = nullptr);
 
 /**
  * @brief Writes the adjusted tiles into output_dir (an existing folder other than theirs): each tile resampled
