@@ -19,6 +19,7 @@ import unittest
 import rospy
 import rostest
 from exocet_msgs.msg import Tile as TileMsg
+from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from std_srvs.srv import Trigger
 
@@ -41,6 +42,13 @@ class TilesGraphReplayTest(unittest.TestCase):
         tiles_msgs, poses = [], []
         rospy.Subscriber('/mosaic/tile', TileMsg, tiles_msgs.append, queue_size=200)
         rospy.Subscriber('/mosaic/odometry', Odometry, poses.append, queue_size=1000)
+        writer_diagnostics = {}
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                if status.name.startswith('tile_writer'):
+                    writer_diagnostics.update({kv.key: kv.value for kv in status.values})
+        rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics, queue_size=100)
         time.sleep(1.0)
         topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/nav/odometry', '/nav/usbl', '/nav/imu',
                   '/nav/altitude', '/nav/datum', '/tf_static']
@@ -65,6 +73,12 @@ class TilesGraphReplayTest(unittest.TestCase):
                 last_count, last_change = len(tiles_msgs), time.time()
             time.sleep(0.2)
 
+        # The registrations of the tiles with each other measure only the pairs with a tile drawn since the last one.
+        self.assertIn('tile pairs measured / reused by them', writer_diagnostics, writer_diagnostics)
+        measured, reused = (int(v) for v in writer_diagnostics['tile pairs measured / reused by them'].split(' / '))
+        rospy.loginfo('tiles_graph_replay: tile pairs measured %d, reused %d', measured, reused)
+        self.assertGreater(measured, 0)
+        self.assertGreater(reused, 0, 'a registration of unchanged tiles took their pairs from the cache')
         firsts = [m for m in tiles_msgs if m.version == 1]
         redrawn = [m for m in tiles_msgs if m.version >= 2]
         self.assertGreaterEqual(len(firsts), 3, 'several tiles written')
