@@ -9,13 +9,9 @@ import unittest
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
-from exocet_msgs.msg import ImageMotion
-from nav_msgs.msg import Odometry
 from osgeo import gdal
-from sensor_msgs.msg import CompressedImage, Image, Range
-from std_srvs.srv import Trigger
 
-from tile_writer_node_check import publish_frames, wait_for_subscribers
+from tile_writer_node_check import chain_publishers, flush_tile_writer, publish_frames, wait_for_subscribers
 
 FRAMES = 40
 OUTPUT_DIR = os.path.join(os.environ.get('ROS_HOME', '/tmp'), 'test_tile_writer_backlog')
@@ -35,24 +31,11 @@ class TileWriterBacklogTest(unittest.TestCase):
                     latest['status'] = s
                     latest['values'] = {kv.key: kv.value for kv in s.values}
         rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics, queue_size=100)
-        publishers = {
-            'images': rospy.Publisher('/camera/image_raw', Image, queue_size=200),
-            'compressed': rospy.Publisher('/camera/image_raw/compressed', CompressedImage, queue_size=10),
-            'motions': rospy.Publisher('/mosaic/motion', ImageMotion, queue_size=200),
-            'odometry': rospy.Publisher('/mosaic/odometry', Odometry, queue_size=200),
-            'heights': rospy.Publisher('/mosaic/camera_height', Range, queue_size=200),
-        }
+        publishers = chain_publishers()
         self.assertTrue(wait_for_subscribers([publishers[k] for k in ('images', 'motions', 'odometry', 'heights')]))
         publish_frames(publishers, FRAMES, rospy.Time(1000.0))
         # The writer is behind at the end of the input: the flush waits until every closed mosaic is on disk.
-        rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
-        deadline = time.time() + 150.0
-        reply = None
-        while time.time() < deadline:
-            reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()
-            if reply.success:
-                break
-            time.sleep(1.0)
+        reply = flush_tile_writer(150.0)
         self.assertTrue(reply is not None and reply.success, reply.message if reply else 'no reply')
         time.sleep(2.5)  # one more /diagnostics after the flush
         values = latest.get('values', {})

@@ -36,6 +36,31 @@ def wait_for_subscribers(publishers, timeout_s=20.0):
     return all(p.get_num_connections() > 0 for p in publishers)
 
 
+def chain_publishers(queue_size=200):
+    """The tile writer's inputs, as publish_frames takes them: images (raw and compressed), motions, fused poses and
+    camera heights on the chain's topics."""
+    return {
+        'images': rospy.Publisher('/camera/image_raw', Image, queue_size=queue_size),
+        'compressed': rospy.Publisher('/camera/image_raw/compressed', CompressedImage, queue_size=10),
+        'motions': rospy.Publisher('/mosaic/motion', ImageMotion, queue_size=queue_size),
+        'odometry': rospy.Publisher('/mosaic/odometry', Odometry, queue_size=queue_size),
+        'heights': rospy.Publisher('/mosaic/camera_height', Range, queue_size=queue_size),
+    }
+
+
+def flush_tile_writer(timeout_s):
+    """Calls /tile_writer/flush until it succeeds (every closed mosaic on disk), at most timeout_s; the last reply."""
+    rospy.wait_for_service('/tile_writer/flush', timeout=10.0)
+    deadline = time.time() + timeout_s
+    reply = None
+    while time.time() < deadline:
+        reply = rospy.ServiceProxy('/tile_writer/flush', Trigger)()
+        if reply.success:
+            break
+        time.sleep(1.0)
+    return reply
+
+
 def publish_frames(publishers, count, start, bad_pose_at=None, bad_image_at=None, first=0):
     """Publishes `count` frames of a nadir camera moving east over seabed(), 0.2 s apart from `start`: the image, its
     motion from the previous one, the fused pose (NaN at bad_pose_at) and the camera height; at bad_image_at a corrupt

@@ -882,6 +882,7 @@ WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMe
   TileFiles files(config_.output_dir);
   // A KMZ is in WGS 84: a tile in a local frame has none.
   const bool write_kmz = config_.write_kmz && raster.local_frame.empty();
+  bool cog_written = config_.write_cog, kmz_written = write_kmz;  // cleared when the companion is left out
   try {
     // Companions first and the GeoTIFF last in commit order: once the GeoTIFF exists, so do they.
     std::string world_tmp, cog_tmp, kmz_tmp;
@@ -897,17 +898,20 @@ WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMe
     if (config_.write_cog || write_kmz) {
       DatasetPtr written = openWritten(tif_tmp, &errors);
       // A companion that fails is left out and reported; the GeoTIFF and the other companions are still written.
-      const auto companion = [&](const char* what, const std::string& temporary, const auto& write) {
+      const auto companion = [&](const char* what, const std::string& temporary, bool* ok, const auto& write) {
         try {
           write();
         } catch (const TileWriteError& e) {
           errors.take();
           tile.companion_errors.push_back(std::string(what) + ": " + e.what());
           files.drop(temporary);
+          *ok = false;
         }
       };
-      if (config_.write_cog) companion("COG", cog_tmp, [&] { writeCog(config_, written.get(), cog_tmp, &errors); });
-      if (write_kmz) companion("KMZ", kmz_tmp, [&] { writeKmz(config_, written.get(), base, kmz_tmp, &errors); });
+      if (config_.write_cog)
+        companion("COG", cog_tmp, &cog_written, [&] { writeCog(config_, written.get(), cog_tmp, &errors); });
+      if (write_kmz)
+        companion("KMZ", kmz_tmp, &kmz_written, [&] { writeKmz(config_, written.get(), base, kmz_tmp, &errors); });
     }
     files.commit();
   } catch (const TileWriteError& e) {
@@ -921,13 +925,8 @@ WrittenTile GeoTiffTileWriter::writeFiles(const TileRaster& raster, const TileMe
   const std::string folder_base = config_.output_dir + "/" + base;
   tile.geotiff_path = folder_base + ".tif";
   if (config_.write_world_file) tile.world_file_path = folder_base + ".tfw";
-  const auto failed = [&](const char* what) {
-    for (const auto& error : tile.companion_errors)
-      if (error.rfind(what, 0) == 0) return true;
-    return false;
-  };
-  if (config_.write_cog && !failed("COG")) tile.cog_path = folder_base + ".cog.tif";
-  if (write_kmz && !failed("KMZ")) tile.kmz_path = folder_base + ".kmz";
+  if (cog_written) tile.cog_path = folder_base + ".cog.tif";
+  if (kmz_written) tile.kmz_path = folder_base + ".kmz";
   return finish("");
 }
 

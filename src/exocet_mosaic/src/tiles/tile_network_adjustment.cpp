@@ -380,7 +380,7 @@ TileAdjustmentResult measureAndSolve(const std::vector<std::string>& paths, cons
       if (a.epsg != b.epsg || std::abs(a.gsd_m - b.gsd_m) > 1e-9 * a.gsd_m) continue;
       const std::pair<std::string, std::string> key(a.path, b.path);
       std::optional<TilePairOffset> measured;
-      const auto known = cache ? cache->pairs_.find(key) : decltype(kept)::iterator();
+      const auto known = cache ? cache->pairs_.find(key) : kept.end();
       if (cache && known != cache->pairs_.end()) {
         measured = known->second;
         ++cache->reused_;
